@@ -1,0 +1,4 @@
+//! `dispflow-vk bench`.
+
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {}

@@ -1,0 +1,25 @@
+//! Command-line interface (clap derive). `main.rs` only parses and dispatches.
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "dispflow-vk",
+    version,
+    about = "Monocular deformable 3D Gaussian splatting with displacement-flow supervision, on Vulkan",
+    long_about = "Monocular deformable 3D Gaussian splatting with displacement-flow supervision \
+(DispFlow-GS), on hand-written Vulkan compute kernels.\n\nDevice selection: DISPFLOW_DEVICE=<index|name \
+substring> picks a Vulkan device (default: the first discrete GPU, else integrated, else lavapipe)."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// List the Vulkan devices and the limits that matter to the kernels.
+    Devices,
+    /// Time the GPU kernels (sort, scan) with GPU timestamps and print a table.
+    Bench(dispflow_vk::bench::BenchArgs),
+}

@@ -1,0 +1,44 @@
+//! The library's error type. Every variant says what was expected and where.
+
+use ash::vk as avk;
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("Vulkan call failed: {0}")]
+    Vulkan(#[from] avk::Result),
+    #[error("cannot load the Vulkan library (libvulkan.so.1): {0}; install the Vulkan loader and a driver (Debian: `bash tools/setup.sh`, or apt-get install mesa-vulkan-drivers)")]
+    Loader(String),
+    #[error("no usable Vulkan device: {0}")]
+    NoDevice(String),
+    #[error("device {device:?} lacks the required feature {feature}: {why}")]
+    MissingFeature {
+        device: String,
+        feature: &'static str,
+        why: &'static str,
+    },
+    #[error("GPU memory allocation {name:?} ({bytes} bytes) failed: {source}")]
+    Alloc {
+        name: String,
+        bytes: u64,
+        #[source]
+        source: gpu_allocator::AllocationError,
+    },
+    #[error("{what}: capacity {capacity} exceeded (asked for {asked})")]
+    Capacity {
+        what: &'static str,
+        capacity: u64,
+        asked: u64,
+    },
+    #[error("invalid argument: {0}")]
+    Invalid(String),
+    #[error(transparent)]
+    Data(#[from] crate::data::DataError),
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
