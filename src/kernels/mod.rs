@@ -1,1 +1,23 @@
-//! (in progress)
+//! One host wrapper per GLSL stage family: `#[repr(C)]` params mirrored in
+//! `glsl/include/params.glsl`, pipelines built once, `record()` taking explicit buffers.
+
+pub mod radix_sort;
+pub mod scan;
+
+/// (Rust struct name, size, [(field, offset)]) of every push-constant struct, for the
+/// reflection test that compares them with the SPIR-V.
+pub fn param_layouts() -> Vec<(&'static str, usize, Vec<(&'static str, usize)>)> {
+    macro_rules! layout {
+        ($t:ty, $($f:ident),*) => {
+            (last_ident(stringify!($t)), std::mem::size_of::<$t>(), vec![$((stringify!($f), std::mem::offset_of!($t, $f))),*])
+        };
+    }
+    vec![
+        layout!(scan::ScanParams, capacity, level, num_levels, pad),
+        layout!(radix_sort::SortParams, capacity, shift, digit_mask, pad),
+    ]
+}
+
+fn last_ident(path: &'static str) -> &'static str {
+    path.rsplit("::").next().unwrap_or(path).trim()
+}

@@ -1,1 +1,5 @@
-//! (in progress)
+//! CPU twins of the GPU stages: same names, same inputs in binding order, plain loops.
+//! They define what the kernels must compute; tests compare the two on identical inputs.
+
+pub mod radix_sort;
+pub mod scan;

@@ -1,0 +1,16 @@
+// Shared constants and helpers. Mirrored in Rust where noted.
+#ifndef COMMON_GLSL
+#define COMMON_GLSL
+
+// Prefix sum: 256 threads × 8 items = 2048 elements per workgroup (src/kernels/scan.rs: SCAN_BLOCK).
+#define SCAN_WG 256
+#define SCAN_ITEMS 8
+#define SCAN_BLOCK 2048
+
+// Radix sort: 4-bit digits, 256 threads × 8 keys = 2048 keys per block (src/kernels/radix_sort.rs).
+#define SORT_WG 256
+#define SORT_ITEMS 8
+#define SORT_BLOCK 2048
+#define SORT_RADIX 16
+
+#endif

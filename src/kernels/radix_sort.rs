@@ -1,0 +1,170 @@
+//! Stable key-value radix sort, u32 or u64 keys (`glsl/sort/*.comp`). CPU twin:
+//! `reference::radix_sort`.
+//!
+//! 4-bit digits, least significant first, `ceil(bits / 4)` passes over the low `bits` bits of
+//! the key (the rasteriser sorts only `tile_bits + depth_bits`). Per pass: `radix_hist` (digit
+//! histogram per 2048-key block, digit-major) → exclusive scan of the histogram → `radix_scatter`
+//! (stable rank within the block). The key count may live on the GPU; every per-pass dispatch is
+//! indirect on the block count computed by `sort_setup`.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::scan::{Count, PrefixSum, ScanScratch};
+use crate::error::{Error, Result};
+use crate::shaders;
+use crate::vk::{Buffer, ComputePipeline, Gpu, Recorder};
+
+/// Keys per block (mirrors `SORT_BLOCK` in glsl/include/common.glsl).
+pub const SORT_BLOCK: u32 = 2048;
+/// Bits per pass (16 digits).
+pub const RADIX_BITS: u32 = 4;
+
+/// Mirrors `SortParams` in glsl/include/params.glsl (checked by tests/layout.rs).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct SortParams {
+    pub capacity: u32,
+    pub shift: u32,
+    pub digit_mask: u32,
+    pub pad: u32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KeyWidth {
+    U32,
+    U64,
+}
+
+impl KeyWidth {
+    pub fn bytes(self) -> u64 {
+        match self {
+            KeyWidth::U32 => 4,
+            KeyWidth::U64 => 8,
+        }
+    }
+    pub fn bits(self) -> u32 {
+        self.bytes() as u32 * 8
+    }
+}
+
+pub struct RadixSort {
+    setup: ComputePipeline,
+    hist: [ComputePipeline; 2],
+    scatter: [ComputePipeline; 2],
+    scan: PrefixSum,
+}
+
+/// Ping-pong key/value buffers and scratch for one capacity, allocated once.
+/// Callers write the input into `keys[0]`/`vals[0]`; `record` says which pair holds the output.
+pub struct SortBuffers {
+    pub keys: [Buffer; 2],
+    pub vals: [Buffer; 2],
+    pub width: KeyWidth,
+    capacity: u32,
+    hist: Buffer,
+    meta: Buffer,
+    count: Buffer,
+    scan: ScanScratch,
+}
+
+impl SortBuffers {
+    pub fn capacity(&self) -> u32 {
+        self.capacity
+    }
+}
+
+/// Byte offset of the histogram length in the sort meta buffer; 256 keeps it aligned for a
+/// storage-buffer binding on every device.
+const META_HIST_LEN: u64 = 256;
+
+/// Passes needed for `bits` significant key bits.
+pub fn passes(bits: u32) -> u32 {
+    bits.div_ceil(RADIX_BITS)
+}
+
+impl RadixSort {
+    pub fn new(gpu: &Gpu) -> Result<Self> {
+        Ok(RadixSort {
+            setup: gpu.pipeline(&shaders::sort::SORT_SETUP)?,
+            hist: [gpu.pipeline(&shaders::sort::RADIX_HIST_U32)?, gpu.pipeline(&shaders::sort::RADIX_HIST_U64)?],
+            scatter: [
+                gpu.pipeline(&shaders::sort::RADIX_SCATTER_U32)?,
+                gpu.pipeline(&shaders::sort::RADIX_SCATTER_U64)?,
+            ],
+            scan: PrefixSum::new(gpu)?,
+        })
+    }
+
+    pub fn buffers(&self, gpu: &Gpu, name: &str, capacity: u32, width: KeyWidth) -> Result<SortBuffers> {
+        let max_groups = gpu.info.max_workgroup_count[0] as u64;
+        let blocks = capacity.div_ceil(SORT_BLOCK);
+        if blocks as u64 > max_groups {
+            return Err(Error::Capacity {
+                what: "radix sort (blocks of 2048 keys per workgroup)",
+                capacity: max_groups * SORT_BLOCK as u64,
+                asked: capacity as u64,
+            });
+        }
+        let kb = capacity as u64 * width.bytes();
+        let range = gpu.info.max_storage_buffer_range as u64;
+        if kb > range {
+            return Err(Error::Capacity {
+                what: "radix sort keys (maxStorageBufferRange of one binding)",
+                capacity: range / width.bytes(),
+                asked: capacity as u64,
+            });
+        }
+        let vb = capacity as u64 * 4;
+        let hist_len = 16 * blocks.max(1);
+        Ok(SortBuffers {
+            keys: [gpu.buffer(&format!("{name} keys A"), kb)?, gpu.buffer(&format!("{name} keys B"), kb)?],
+            vals: [gpu.buffer(&format!("{name} values A"), vb)?, gpu.buffer(&format!("{name} values B"), vb)?],
+            width,
+            capacity,
+            hist: gpu.buffer(&format!("{name} digit histogram"), hist_len as u64 * 4)?,
+            meta: gpu.buffer(&format!("{name} meta"), META_HIST_LEN + 16)?,
+            count: gpu.buffer(&format!("{name} count"), 16)?,
+            scan: self.scan.scratch(gpu, hist_len)?,
+        })
+    }
+
+    /// Sorts the first `count` pairs of (`b.keys[0]`, `b.vals[0]`) by the low `bits` bits of the
+    /// key, stably (higher key bits are ignored). Returns the index (0 or 1) of the pair of
+    /// buffers that holds the result: `passes(bits)` is odd → 1.
+    pub fn record(&self, rec: &mut Recorder<'_>, b: &SortBuffers, count: Count<'_>, bits: u32) -> usize {
+        assert!(bits <= b.width.bits(), "sort of {bits} bits with {:?} keys", b.width);
+        if let Count::Host(n) = count {
+            assert!(n <= b.capacity, "sort of {n} keys exceeds the capacity {}", b.capacity);
+        }
+        let count = count.to_gpu(rec, b.count.slice(0, 4));
+        let w = (b.width == KeyWidth::U64) as usize;
+        let pc = |shift: u32| {
+            let left = bits - shift;
+            let digit_mask = if left >= RADIX_BITS { 15 } else { (1 << left) - 1 };
+            SortParams { capacity: b.capacity, shift, digit_mask, pad: 0 }
+        };
+        rec.dispatch(&self.setup, &pc(0), &[count, b.meta.all()], [1, 1, 1]);
+        let args = b.meta.slice(4, 12);
+        let hist_len = b.meta.slice(META_HIST_LEN, 4);
+        for p in 0..passes(bits) {
+            let (src, dst) = ((p % 2) as usize, ((p + 1) % 2) as usize);
+            let pc = pc(p * RADIX_BITS);
+            rec.dispatch_indirect(&self.hist[w], &pc, &[b.meta.all(), b.keys[src].all(), b.hist.all()], args);
+            self.scan.record(rec, &b.scan, b.hist.all(), b.hist.all(), Count::Gpu(hist_len));
+            rec.dispatch_indirect(
+                &self.scatter[w],
+                &pc,
+                &[
+                    b.meta.all(),
+                    b.keys[src].all(),
+                    b.vals[src].all(),
+                    b.hist.all(),
+                    b.keys[dst].all(),
+                    b.vals[dst].all(),
+                ],
+                args,
+            );
+        }
+        (passes(bits) % 2) as usize
+    }
+}

@@ -1,0 +1,86 @@
+//! Compute pipelines built from the reflected shader table (no layout written by hand).
+
+use std::sync::Arc;
+
+use ash::vk;
+
+use super::device::{Gpu, Shared};
+use crate::error::Result;
+use crate::shaders::ShaderInfo;
+
+/// A compute pipeline whose descriptor layout (push descriptors, set 0), push-constant range and
+/// workgroup size come from the SPIR-V reflection in the shader table.
+pub struct ComputePipeline {
+    shared: Arc<Shared>,
+    pub info: &'static ShaderInfo,
+    pub(crate) pipeline: vk::Pipeline,
+    pub(crate) layout: vk::PipelineLayout,
+    set_layout: vk::DescriptorSetLayout,
+}
+
+impl ComputePipeline {
+    pub fn workgroup_size(&self) -> [u32; 3] {
+        self.info.workgroup_size
+    }
+}
+
+impl Drop for ComputePipeline {
+    fn drop(&mut self) {
+        let d = &self.shared.device;
+        unsafe {
+            d.destroy_pipeline(self.pipeline, None);
+            d.destroy_pipeline_layout(self.layout, None);
+            d.destroy_descriptor_set_layout(self.set_layout, None);
+        }
+    }
+}
+
+impl Gpu {
+    pub fn pipeline(&self, info: &'static ShaderInfo) -> Result<ComputePipeline> {
+        let d = self.device();
+        let bindings: Vec<_> = info
+            .bindings
+            .iter()
+            .map(|b| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b.binding)
+                    .descriptor_type(if b.uniform {
+                        vk::DescriptorType::UNIFORM_BUFFER
+                    } else {
+                        vk::DescriptorType::STORAGE_BUFFER
+                    })
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            })
+            .collect();
+        let set_layout = unsafe {
+            d.create_descriptor_set_layout(
+                &vk::DescriptorSetLayoutCreateInfo::default()
+                    .flags(vk::DescriptorSetLayoutCreateFlags::PUSH_DESCRIPTOR_KHR)
+                    .bindings(&bindings),
+                None,
+            )?
+        };
+        let ranges = [vk::PushConstantRange::default()
+            .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            .offset(0)
+            .size(info.push_constant_size)];
+        let set_layouts = [set_layout];
+        let mut pli = vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts);
+        if info.push_constant_size > 0 {
+            pli = pli.push_constant_ranges(&ranges);
+        }
+        let layout = unsafe { d.create_pipeline_layout(&pli, None)? };
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(info.spirv);
+        let module = unsafe { d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)? };
+        let stage = vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::COMPUTE)
+            .module(module)
+            .name(c"main");
+        let ci = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
+        let res = unsafe { d.create_compute_pipelines(vk::PipelineCache::null(), &ci, None) };
+        unsafe { d.destroy_shader_module(module, None) };
+        let pipeline = res.map_err(|(_, e)| e)?[0];
+        Ok(ComputePipeline { shared: self.shared.clone(), info, pipeline, layout, set_layout })
+    }
+}

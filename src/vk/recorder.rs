@@ -1,0 +1,410 @@
+//! Command recording with barriers placed where data flows, and GPU timestamps per dispatch.
+//!
+//! Each dispatch declares its buffers (access from reflection: `readonly` bindings are reads,
+//! everything else a write). The recorder remembers what was written and read since the last
+//! barrier, and emits one global memory barrier only before a command that reads or overwrites
+//! a byte range an earlier command wrote (RAW/WAW), or overwrites a range one read (WAR).
+//! Indirect-argument buffers count as reads by the indirect stage.
+
+use ash::vk;
+use bytemuck::Pod;
+
+use super::buffer::BufSlice;
+use super::device::Gpu;
+use super::pipeline::ComputePipeline;
+use crate::error::Result;
+
+#[derive(Clone, Copy)]
+struct Range {
+    buf: vk::Buffer,
+    start: u64,
+    end: u64,
+}
+
+impl Range {
+    fn of(s: &BufSlice<'_>) -> Range {
+        Range { buf: s.raw(), start: s.offset, end: s.offset + s.size }
+    }
+    fn overlaps(&self, o: &Range) -> bool {
+        self.buf == o.buf && self.start < o.end && o.start < self.end
+    }
+}
+
+/// GPU time of each timed command, in submission order.
+#[derive(Debug, Clone, Default)]
+pub struct Timings {
+    pub entries: Vec<(String, f64)>,
+}
+
+impl Timings {
+    /// Total milliseconds over all entries.
+    pub fn total_ms(&self) -> f64 {
+        self.entries.iter().map(|e| e.1).sum()
+    }
+
+    /// Milliseconds summed per label, in first-seen order.
+    pub fn by_label(&self) -> Vec<(String, f64)> {
+        let mut out: Vec<(String, f64)> = Vec::new();
+        for (l, ms) in &self.entries {
+            match out.iter_mut().find(|e| &e.0 == l) {
+                Some(e) => e.1 += ms,
+                None => out.push((l.clone(), *ms)),
+            }
+        }
+        out
+    }
+}
+
+const MAX_TIMED: u32 = 4096;
+
+/// One primary command buffer on the compute queue. `finish()` submits and waits.
+pub struct Recorder<'g> {
+    gpu: &'g Gpu,
+    pool: vk::CommandPool,
+    cmd: vk::CommandBuffer,
+    written: Vec<Range>,
+    read: Vec<Range>,
+    queries: Option<vk::QueryPool>,
+    labels: Vec<String>,
+    zone: String,
+    barriers: u32,
+    dispatches: u32,
+}
+
+impl<'g> Recorder<'g> {
+    /// A recorder without timestamps.
+    pub fn new(gpu: &'g Gpu) -> Result<Self> {
+        Self::create(gpu, false)
+    }
+
+    /// A recorder that writes a timestamp pair around every dispatch (when the queue has
+    /// timestamps; otherwise `finish` returns no entries).
+    pub fn timed(gpu: &'g Gpu) -> Result<Self> {
+        Self::create(gpu, gpu.info.timestamp_period_ns.is_some())
+    }
+
+    fn create(gpu: &'g Gpu, timed: bool) -> Result<Self> {
+        let d = gpu.device();
+        let pool = unsafe {
+            d.create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(gpu.queue_family)
+                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                None,
+            )?
+        };
+        let mut rec = Recorder {
+            gpu,
+            pool,
+            cmd: vk::CommandBuffer::null(),
+            written: Vec::new(),
+            read: Vec::new(),
+            queries: None,
+            labels: Vec::new(),
+            zone: String::new(),
+            barriers: 0,
+            dispatches: 0,
+        };
+        rec.cmd = unsafe {
+            d.allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            )?[0]
+        };
+        unsafe {
+            d.begin_command_buffer(
+                rec.cmd,
+                &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+            )?
+        };
+        if timed {
+            let qp = unsafe {
+                d.create_query_pool(
+                    &vk::QueryPoolCreateInfo::default()
+                        .query_type(vk::QueryType::TIMESTAMP)
+                        .query_count(2 * MAX_TIMED),
+                    None,
+                )?
+            };
+            unsafe { d.cmd_reset_query_pool(rec.cmd, qp, 0, 2 * MAX_TIMED) };
+            rec.queries = Some(qp);
+        }
+        Ok(rec)
+    }
+
+    pub fn gpu(&self) -> &'g Gpu {
+        self.gpu
+    }
+
+    /// Prefix for the timing labels of the following commands (e.g. `"sort"`); `""` clears it.
+    pub fn set_zone(&mut self, zone: &str) {
+        self.zone = zone.to_string();
+    }
+
+    /// Barriers emitted so far (for tests and reports).
+    pub fn barrier_count(&self) -> u32 {
+        self.barriers
+    }
+
+    /// Makes sure the next command sees `reads`/`writes` safely with respect to earlier ones.
+    fn hazard(&mut self, reads: &[Range], writes: &[Range]) {
+        let raw_waw = reads.iter().chain(writes).any(|r| self.written.iter().any(|w| w.overlaps(r)));
+        let war = writes.iter().any(|w| self.read.iter().any(|r| r.overlaps(w)));
+        if raw_waw || war {
+            self.barrier();
+        }
+        self.read.extend_from_slice(reads);
+        self.written.extend_from_slice(writes);
+    }
+
+    /// A full compute/transfer/indirect memory barrier. Normally placed by the hazard tracker;
+    /// public for the rare case of a dependency the tracker cannot see.
+    pub fn barrier(&mut self) {
+        let mb = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(
+                vk::AccessFlags::SHADER_READ
+                    | vk::AccessFlags::SHADER_WRITE
+                    | vk::AccessFlags::TRANSFER_READ
+                    | vk::AccessFlags::TRANSFER_WRITE
+                    | vk::AccessFlags::INDIRECT_COMMAND_READ
+                    | vk::AccessFlags::UNIFORM_READ,
+            );
+        unsafe {
+            self.gpu.device().cmd_pipeline_barrier(
+                self.cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::COMPUTE_SHADER
+                    | vk::PipelineStageFlags::TRANSFER
+                    | vk::PipelineStageFlags::DRAW_INDIRECT,
+                vk::DependencyFlags::empty(),
+                &[mb],
+                &[],
+                &[],
+            )
+        };
+        self.written.clear();
+        self.read.clear();
+        self.barriers += 1;
+    }
+
+    fn time_begin(&mut self, label: &str) -> Option<u32> {
+        let qp = self.queries?;
+        let i = self.labels.len() as u32;
+        if i >= MAX_TIMED {
+            return None;
+        }
+        self.labels.push(if self.zone.is_empty() { label.to_string() } else { format!("{}/{label}", self.zone) });
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, qp, 2 * i)
+        };
+        Some(i)
+    }
+
+    fn time_end(&mut self, i: Option<u32>) {
+        if let (Some(i), Some(qp)) = (i, self.queries) {
+            unsafe {
+                self.gpu
+                    .device()
+                    .cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, qp, 2 * i + 1)
+            };
+        }
+    }
+
+    fn bind<P: Pod>(&mut self, p: &ComputePipeline, pc: &P, bindings: &[BufSlice<'_>]) -> Vec<Range> {
+        let info = p.info;
+        assert_eq!(
+            bindings.len(),
+            info.bindings.len(),
+            "{}: expects {} bindings, got {}",
+            info.name,
+            info.bindings.len(),
+            bindings.len()
+        );
+        assert!(
+            info.push_constant_size == 0 || std::mem::size_of::<P>() as u32 == info.push_constant_size,
+            "{}: push-constant struct is {} bytes, the shader's {} ({})",
+            info.name,
+            std::mem::size_of::<P>(),
+            info.push_constant_size,
+            info.push_constant_struct
+        );
+        let infos: Vec<vk::DescriptorBufferInfo> = bindings
+            .iter()
+            .map(|b| vk::DescriptorBufferInfo::default().buffer(b.raw()).offset(b.offset).range(b.size))
+            .collect();
+        let writes: Vec<vk::WriteDescriptorSet> = info
+            .bindings
+            .iter()
+            .zip(&infos)
+            .map(|(b, bi)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_binding(b.binding)
+                    .descriptor_type(if b.uniform {
+                        vk::DescriptorType::UNIFORM_BUFFER
+                    } else {
+                        vk::DescriptorType::STORAGE_BUFFER
+                    })
+                    .buffer_info(std::slice::from_ref(bi))
+            })
+            .collect();
+        let mut reads = Vec::new();
+        let mut wr = Vec::new();
+        for (b, s) in info.bindings.iter().zip(bindings) {
+            if b.readonly {
+                reads.push(Range::of(s));
+            } else {
+                wr.push(Range::of(s));
+            }
+        }
+        self.hazard(&reads, &wr);
+        let d = self.gpu.device();
+        unsafe {
+            d.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, p.pipeline);
+            self.gpu
+                .push_desc
+                .cmd_push_descriptor_set(self.cmd, vk::PipelineBindPoint::COMPUTE, p.layout, 0, &writes);
+            if info.push_constant_size > 0 {
+                d.cmd_push_constants(self.cmd, p.layout, vk::ShaderStageFlags::COMPUTE, 0, bytemuck::bytes_of(pc));
+            }
+        }
+        reads
+    }
+
+    /// Dispatches `groups` workgroups.
+    pub fn dispatch<P: Pod>(&mut self, p: &ComputePipeline, pc: &P, bindings: &[BufSlice<'_>], groups: [u32; 3]) {
+        self.bind(p, pc, bindings);
+        let lim = self.gpu.info.max_workgroup_count;
+        assert!(
+            groups.iter().zip(lim).all(|(g, l)| *g <= l),
+            "{}: {groups:?} workgroups exceed the device limit {lim:?}",
+            p.info.name
+        );
+        let t = self.time_begin(p.info.name.rsplit('/').next().unwrap());
+        if groups.iter().all(|&g| g > 0) {
+            unsafe { self.gpu.device().cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]) };
+        }
+        self.time_end(t);
+        self.dispatches += 1;
+    }
+
+    /// Dispatches enough workgroups to cover `threads` invocations (workgroup size from reflection).
+    pub fn dispatch_threads<P: Pod>(
+        &mut self,
+        p: &ComputePipeline,
+        pc: &P,
+        bindings: &[BufSlice<'_>],
+        threads: [u32; 3],
+    ) {
+        let wg = p.workgroup_size();
+        let groups = [0, 1, 2].map(|i| threads[i].div_ceil(wg[i]));
+        self.dispatch(p, pc, bindings, groups);
+    }
+
+    /// Dispatches with the workgroup count read from `args` (three u32) on the GPU, so a count
+    /// computed by an earlier dispatch never travels to the host.
+    pub fn dispatch_indirect<P: Pod>(
+        &mut self,
+        p: &ComputePipeline,
+        pc: &P,
+        bindings: &[BufSlice<'_>],
+        args: BufSlice<'_>,
+    ) {
+        assert!(args.size >= 12 && args.offset % 4 == 0, "{}: bad indirect args {args:?}", p.info.name);
+        let a = Range::of(&args.buf.slice(args.offset, 12));
+        // The args are read by the indirect stage before the shader runs.
+        self.hazard(&[a], &[]);
+        self.bind(p, pc, bindings);
+        let t = self.time_begin(p.info.name.rsplit('/').next().unwrap());
+        unsafe { self.gpu.device().cmd_dispatch_indirect(self.cmd, args.raw(), args.offset) };
+        self.time_end(t);
+        self.dispatches += 1;
+    }
+
+    /// Copies `src` to `dst` (equal sizes).
+    pub fn copy(&mut self, src: BufSlice<'_>, dst: BufSlice<'_>) {
+        assert_eq!(src.size, dst.size, "copy {src:?} -> {dst:?}");
+        self.hazard(&[Range::of(&src)], &[Range::of(&dst)]);
+        let region = vk::BufferCopy { src_offset: src.offset, dst_offset: dst.offset, size: src.size };
+        unsafe { self.gpu.device().cmd_copy_buffer(self.cmd, src.raw(), dst.raw(), &[region]) };
+    }
+
+    /// Fills `dst` (size a multiple of 4) with the 32-bit pattern `value`.
+    pub fn fill(&mut self, dst: BufSlice<'_>, value: u32) {
+        self.hazard(&[], &[Range::of(&dst)]);
+        unsafe { self.gpu.device().cmd_fill_buffer(self.cmd, dst.raw(), dst.offset, dst.size, value) };
+    }
+
+    /// Writes a few words from the host inline in the command stream (at most 64 KiB).
+    pub fn update(&mut self, dst: BufSlice<'_>, words: &[u32]) {
+        let bytes = (words.len() * 4) as u64;
+        assert!(bytes <= dst.size && bytes <= 65536 && !words.is_empty(), "update {dst:?}");
+        let r = Range { buf: dst.raw(), start: dst.offset, end: dst.offset + bytes };
+        self.hazard(&[], &[r]);
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_update_buffer(self.cmd, dst.raw(), dst.offset, bytemuck::cast_slice(words))
+        };
+    }
+
+    /// Submits, waits, and returns the GPU time of every timed dispatch.
+    pub fn finish(mut self) -> Result<Timings> {
+        let d = self.gpu.device();
+        // Make every write visible to the host (readback through mapped memory).
+        let mb = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ);
+        unsafe {
+            d.cmd_pipeline_barrier(
+                self.cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &[mb],
+                &[],
+                &[],
+            );
+            d.end_command_buffer(self.cmd)?;
+            let fence = d.create_fence(&vk::FenceCreateInfo::default(), None)?;
+            let cmds = [self.cmd];
+            let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+            let res = {
+                let q = self.gpu.queue.lock().unwrap();
+                d.queue_submit(*q, &submit, fence)
+            }
+            .and_then(|_| d.wait_for_fences(&[fence], true, u64::MAX));
+            d.destroy_fence(fence, None);
+            res?;
+        }
+        let mut t = Timings::default();
+        if let (Some(qp), Some(period)) = (self.queries, self.gpu.info.timestamp_period_ns) {
+            let n = self.labels.len();
+            if n > 0 {
+                let mut raw = vec![0u64; 2 * n];
+                unsafe { d.get_query_pool_results(qp, 0, &mut raw, vk::QueryResultFlags::TYPE_64)? };
+                for (i, l) in self.labels.drain(..).enumerate() {
+                    let ticks = raw[2 * i + 1].wrapping_sub(raw[2 * i]);
+                    t.entries.push((l, ticks as f64 * period as f64 * 1e-6));
+                }
+            }
+        }
+        Ok(t)
+    }
+}
+
+impl Drop for Recorder<'_> {
+    fn drop(&mut self) {
+        let d = self.gpu.device();
+        unsafe {
+            if let Some(qp) = self.queries.take() {
+                d.destroy_query_pool(qp, None);
+            }
+            d.destroy_command_pool(self.pool, None);
+        }
+    }
+}
