@@ -42,10 +42,18 @@ fn main() {
     // family -> [(CONST_NAME, shader path, spv file, reflection)]
     let mut table: BTreeMap<String, Vec<(String, String, PathBuf, Reflected)>> = BTreeMap::new();
     for src in &sources {
-        let rel = src.strip_prefix(&glsl).unwrap().to_string_lossy().replace('\\', "/");
-        let text = std::fs::read_to_string(src).unwrap_or_else(|e| panic!("{}: {e}", src.display()));
+        let rel = src
+            .strip_prefix(&glsl)
+            .unwrap()
+            .to_string_lossy()
+            .replace('\\', "/");
+        let text =
+            std::fs::read_to_string(src).unwrap_or_else(|e| panic!("{}: {e}", src.display()));
         let mut opts = shaderc::CompileOptions::new().unwrap();
-        opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
+        opts.set_target_env(
+            shaderc::TargetEnv::Vulkan,
+            shaderc::EnvVersion::Vulkan1_2 as u32,
+        );
         opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
         // No SPIR-V-level optimisation: it strips the names reflection reads (push-constant
         // members), and the driver's own compiler optimises the module anyway.
@@ -53,7 +61,10 @@ fn main() {
         opts.set_warnings_as_errors();
         let inc_dir = glsl.join("include");
         opts.set_include_callback(move |name, _ty, from, _depth| {
-            let from_dir = Path::new(from).parent().map(Path::to_path_buf).unwrap_or_default();
+            let from_dir = Path::new(from)
+                .parent()
+                .map(Path::to_path_buf)
+                .unwrap_or_default();
             for dir in [from_dir, inc_dir.clone()] {
                 let p = dir.join(name);
                 if let Ok(content) = std::fs::read_to_string(&p) {
@@ -63,7 +74,9 @@ fn main() {
                     });
                 }
             }
-            Err(format!("cannot find include \"{name}\" (looked next to {from} and in glsl/include)"))
+            Err(format!(
+                "cannot find include \"{name}\" (looked next to {from} and in glsl/include)"
+            ))
         });
         let src_name = src.to_string_lossy().into_owned();
         let spv = match compiler.compile_into_spirv(
@@ -110,7 +123,12 @@ fn main() {
             writeln!(code, "    /// `glsl/{stem}.comp`").unwrap();
             writeln!(code, "    pub static {cname}: ShaderInfo = ShaderInfo {{").unwrap();
             writeln!(code, "        name: {stem:?},").unwrap();
-            writeln!(code, "        spirv: include_bytes!({:?}),", spv.to_string_lossy()).unwrap();
+            writeln!(
+                code,
+                "        spirv: include_bytes!({:?}),",
+                spv.to_string_lossy()
+            )
+            .unwrap();
             writeln!(code, "        workgroup_size: {:?},", r.workgroup).unwrap();
             writeln!(code, "        bindings: &[").unwrap();
             for b in &r.bindings {
@@ -124,19 +142,30 @@ fn main() {
             writeln!(code, "        ],").unwrap();
             writeln!(code, "        push_constant_size: {},", r.push_size).unwrap();
             writeln!(code, "        push_constant_struct: {:?},", r.push_struct).unwrap();
-            writeln!(code, "        push_constant_members: &{:?},", r.push_members).unwrap();
+            writeln!(
+                code,
+                "        push_constant_members: &{:?},",
+                r.push_members
+            )
+            .unwrap();
             writeln!(code, "    }};").unwrap();
             all.push(format!("&{family}::{cname}"));
         }
         writeln!(code, "}}").unwrap();
     }
-    writeln!(code, "/// Every shader, in table order.\npub static ALL: &[&ShaderInfo] = &[{}];", all.join(", "))
-        .unwrap();
+    writeln!(
+        code,
+        "/// Every shader, in table order.\npub static ALL: &[&ShaderInfo] = &[{}];",
+        all.join(", ")
+    )
+    .unwrap();
     std::fs::write(out.join("shaders.rs"), code).unwrap();
 }
 
 fn collect(dir: &Path, out: &mut Vec<PathBuf>) {
-    let Ok(rd) = std::fs::read_dir(dir) else { return };
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return;
+    };
     for e in rd.flatten() {
         let p = e.path();
         if p.is_dir() {
@@ -151,17 +180,25 @@ fn collect(dir: &Path, out: &mut Vec<PathBuf>) {
 /// walk of the decorations for what it does not report: readonly/writeonly access and the
 /// push-constant struct's member offsets (checked against the Rust structs in tests/layout.rs).
 fn reflect(rel: &str, bytes: &[u8]) -> Reflected {
-    let r = Reflection::new_from_spirv(bytes).unwrap_or_else(|e| panic!("{rel}: reflection: {e:?}"));
-    let sets = r.get_descriptor_sets().unwrap_or_else(|e| panic!("{rel}: reflection: {e:?}"));
-    let wg = r
-        .get_compute_group_size()
-        .unwrap_or_else(|| panic!("{rel}: no fixed local_size (spec-constant sizes are not supported)"));
-    let push = r.get_push_constant_range().unwrap_or_else(|e| panic!("{rel}: {e:?}"));
+    let r =
+        Reflection::new_from_spirv(bytes).unwrap_or_else(|e| panic!("{rel}: reflection: {e:?}"));
+    let sets = r
+        .get_descriptor_sets()
+        .unwrap_or_else(|e| panic!("{rel}: reflection: {e:?}"));
+    let wg = r.get_compute_group_size().unwrap_or_else(|| {
+        panic!("{rel}: no fixed local_size (spec-constant sizes are not supported)")
+    });
+    let push = r
+        .get_push_constant_range()
+        .unwrap_or_else(|e| panic!("{rel}: {e:?}"));
     let m = &r.0;
 
     let mut bindings = Vec::new();
     for (set, binds) in &sets {
-        assert_eq!(*set, 0, "{rel}: only descriptor set 0 is used (push descriptors)");
+        assert_eq!(
+            *set, 0,
+            "{rel}: only descriptor set 0 is used (push descriptors)"
+        );
         for (binding, info) in binds {
             let uniform = match info.ty {
                 rspirv_reflect::DescriptorType::STORAGE_BUFFER => false,
@@ -172,11 +209,19 @@ fn reflect(rel: &str, bytes: &[u8]) -> Reflected {
             let (readonly, writeonly) = access(m, var);
             // Anonymous blocks (`buffer Keys { .. };`) have no instance name: use the block's.
             let name = if info.name.is_empty() {
-                pointee_struct(m, var).map(|s| name_of(m, s)).unwrap_or_default()
+                pointee_struct(m, var)
+                    .map(|s| name_of(m, s))
+                    .unwrap_or_default()
             } else {
                 info.name.clone()
             };
-            bindings.push(Binding { binding: *binding, name, uniform, readonly, writeonly });
+            bindings.push(Binding {
+                binding: *binding,
+                name,
+                uniform,
+                readonly,
+                writeonly,
+            });
         }
     }
     let (push_struct, push_members) = push_layout(m);
@@ -189,7 +234,10 @@ fn reflect(rel: &str, bytes: &[u8]) -> Reflected {
     }
 }
 
-fn decorations(m: &Module, target: u32) -> impl Iterator<Item = &rspirv_reflect::rspirv::dr::Instruction> {
+fn decorations(
+    m: &Module,
+    target: u32,
+) -> impl Iterator<Item = &rspirv_reflect::rspirv::dr::Instruction> {
     m.annotations.iter().filter(move |i| {
         matches!(i.class.opcode, Op::Decorate | Op::MemberDecorate)
             && i.operands.first() == Some(&Operand::IdRef(target))
@@ -210,9 +258,15 @@ fn find_binding_var(m: &Module, binding: u32) -> Option<u32> {
 
 /// The struct type behind a variable (through its pointer type).
 fn pointee_struct(m: &Module, var: u32) -> Option<u32> {
-    let v = m.types_global_values.iter().find(|i| i.result_id == Some(var))?;
+    let v = m
+        .types_global_values
+        .iter()
+        .find(|i| i.result_id == Some(var))?;
     let ptr_ty = v.result_type?;
-    let p = m.types_global_values.iter().find(|i| i.result_id == Some(ptr_ty))?;
+    let p = m
+        .types_global_values
+        .iter()
+        .find(|i| i.result_id == Some(ptr_ty))?;
     match p.operands.get(1) {
         Some(Operand::IdRef(s)) => Some(*s),
         _ => None,
@@ -234,9 +288,11 @@ fn name_of(m: &Module, id: u32) -> String {
     m.debug_names
         .iter()
         .find_map(|i| {
-            (i.class.opcode == Op::Name && i.operands[0] == Operand::IdRef(id)).then(|| match &i.operands[1] {
-                Operand::LiteralString(s) => s.clone(),
-                _ => String::new(),
+            (i.class.opcode == Op::Name && i.operands[0] == Operand::IdRef(id)).then(|| {
+                match &i.operands[1] {
+                    Operand::LiteralString(s) => s.clone(),
+                    _ => String::new(),
+                }
             })
         })
         .unwrap_or_default()
@@ -247,12 +303,18 @@ fn name_of(m: &Module, id: u32) -> String {
 /// holds a single struct member.
 fn push_layout(m: &Module) -> (String, Vec<(String, u32)>) {
     let Some(var) = m.types_global_values.iter().find(|i| {
-        i.class.opcode == Op::Variable && i.operands.first() == Some(&Operand::StorageClass(StorageClass::PushConstant))
+        i.class.opcode == Op::Variable
+            && i.operands.first() == Some(&Operand::StorageClass(StorageClass::PushConstant))
     }) else {
         return (String::new(), Vec::new());
     };
     let mut st = pointee_struct(m, var.result_id.unwrap()).unwrap();
-    let def = |id: u32| m.types_global_values.iter().find(|i| i.result_id == Some(id)).unwrap();
+    let def = |id: u32| {
+        m.types_global_values
+            .iter()
+            .find(|i| i.result_id == Some(id))
+            .unwrap()
+    };
     let block = def(st);
     if block.operands.len() == 1 {
         if let Operand::IdRef(inner) = block.operands[0] {

@@ -17,7 +17,9 @@ static GPU: OnceLock<Mutex<Gpu>> = OnceLock::new();
 pub fn gpu() -> TestGpu {
     let m = GPU.get_or_init(|| {
         let mut opts = GpuOptions::from_env();
-        if opts.validation == Validation::Off && std::env::var("DISPFLOW_VALIDATION").as_deref() != Ok("0") {
+        if opts.validation == Validation::Off
+            && std::env::var("DISPFLOW_VALIDATION").as_deref() != Ok("0")
+        {
             opts.validation = Validation::IfAvailable;
         }
         let gpu = Gpu::new(&opts).unwrap_or_else(|e| panic!("test device: {e}"));
@@ -49,7 +51,11 @@ impl Drop for TestGpu {
     fn drop(&mut self) {
         let errors = self.guard.take_validation_errors();
         if !errors.is_empty() && !std::thread::panicking() {
-            panic!("{} Vulkan validation error(s):\n{}", errors.len(), errors.join("\n"));
+            panic!(
+                "{} Vulkan validation error(s):\n{}",
+                errors.len(),
+                errors.join("\n")
+            );
         }
     }
 }

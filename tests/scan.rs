@@ -21,8 +21,11 @@ fn scan_matches_reference() {
     for (i, &n) in sizes().iter().enumerate() {
         // Small values keep partial sums informative; one case uses full-range values (wrap-around).
         let mut noise = Noise::new(i as u64);
-        let input: Vec<u32> =
-            if n == 4097 { noise.u32s(n as usize) } else { noise.u32s(n as usize).iter().map(|x| x % 1000).collect() };
+        let input: Vec<u32> = if n == 4097 {
+            noise.u32s(n as usize)
+        } else {
+            noise.u32s(n as usize).iter().map(|x| x % 1000).collect()
+        };
         let cap = n.max(1);
         let scratch = scan.scratch(&gpu, cap).unwrap();
         let inp = gpu.buffer("scan input", cap as u64 * 4).unwrap();
@@ -36,7 +39,10 @@ fn scan_matches_reference() {
         let want = reference::scan::exclusive_scan(&input);
         assert_eq!(got.len(), want.len());
         if let Some(p) = got.iter().zip(&want).position(|(a, b)| a != b) {
-            panic!("n = {n}: first mismatch at {p}: got {}, want {}", got[p], want[p]);
+            panic!(
+                "n = {n}: first mismatch at {p}: got {}, want {}",
+                got[p], want[p]
+            );
         }
     }
 }

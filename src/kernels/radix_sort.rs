@@ -86,7 +86,10 @@ impl RadixSort {
     pub fn new(gpu: &Gpu) -> Result<Self> {
         Ok(RadixSort {
             setup: gpu.pipeline(&shaders::sort::SORT_SETUP)?,
-            hist: [gpu.pipeline(&shaders::sort::RADIX_HIST_U32)?, gpu.pipeline(&shaders::sort::RADIX_HIST_U64)?],
+            hist: [
+                gpu.pipeline(&shaders::sort::RADIX_HIST_U32)?,
+                gpu.pipeline(&shaders::sort::RADIX_HIST_U64)?,
+            ],
             scatter: [
                 gpu.pipeline(&shaders::sort::RADIX_SCATTER_U32)?,
                 gpu.pipeline(&shaders::sort::RADIX_SCATTER_U64)?,
@@ -95,7 +98,13 @@ impl RadixSort {
         })
     }
 
-    pub fn buffers(&self, gpu: &Gpu, name: &str, capacity: u32, width: KeyWidth) -> Result<SortBuffers> {
+    pub fn buffers(
+        &self,
+        gpu: &Gpu,
+        name: &str,
+        capacity: u32,
+        width: KeyWidth,
+    ) -> Result<SortBuffers> {
         let max_groups = gpu.info.max_workgroup_count[0] as u64;
         let blocks = capacity.div_ceil(SORT_BLOCK);
         if blocks as u64 > max_groups {
@@ -117,8 +126,14 @@ impl RadixSort {
         let vb = capacity as u64 * 4;
         let hist_len = 16 * blocks.max(1);
         Ok(SortBuffers {
-            keys: [gpu.buffer(&format!("{name} keys A"), kb)?, gpu.buffer(&format!("{name} keys B"), kb)?],
-            vals: [gpu.buffer(&format!("{name} values A"), vb)?, gpu.buffer(&format!("{name} values B"), vb)?],
+            keys: [
+                gpu.buffer(&format!("{name} keys A"), kb)?,
+                gpu.buffer(&format!("{name} keys B"), kb)?,
+            ],
+            vals: [
+                gpu.buffer(&format!("{name} values A"), vb)?,
+                gpu.buffer(&format!("{name} values B"), vb)?,
+            ],
             width,
             capacity,
             hist: gpu.buffer(&format!("{name} digit histogram"), hist_len as u64 * 4)?,
@@ -131,17 +146,40 @@ impl RadixSort {
     /// Sorts the first `count` pairs of (`b.keys[0]`, `b.vals[0]`) by the low `bits` bits of the
     /// key, stably (higher key bits are ignored). Returns the index (0 or 1) of the pair of
     /// buffers that holds the result: `passes(bits)` is odd → 1.
-    pub fn record(&self, rec: &mut Recorder<'_>, b: &SortBuffers, count: Count<'_>, bits: u32) -> usize {
-        assert!(bits <= b.width.bits(), "sort of {bits} bits with {:?} keys", b.width);
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &SortBuffers,
+        count: Count<'_>,
+        bits: u32,
+    ) -> usize {
+        assert!(
+            bits <= b.width.bits(),
+            "sort of {bits} bits with {:?} keys",
+            b.width
+        );
         if let Count::Host(n) = count {
-            assert!(n <= b.capacity, "sort of {n} keys exceeds the capacity {}", b.capacity);
+            assert!(
+                n <= b.capacity,
+                "sort of {n} keys exceeds the capacity {}",
+                b.capacity
+            );
         }
         let count = count.to_gpu(rec, b.count.slice(0, 4));
         let w = (b.width == KeyWidth::U64) as usize;
         let pc = |shift: u32| {
             let left = bits - shift;
-            let digit_mask = if left >= RADIX_BITS { 15 } else { (1 << left) - 1 };
-            SortParams { capacity: b.capacity, shift, digit_mask, pad: 0 }
+            let digit_mask = if left >= RADIX_BITS {
+                15
+            } else {
+                (1 << left) - 1
+            };
+            SortParams {
+                capacity: b.capacity,
+                shift,
+                digit_mask,
+                pad: 0,
+            }
         };
         rec.dispatch(&self.setup, &pc(0), &[count, b.meta.all()], [1, 1, 1]);
         let args = b.meta.slice(4, 12);
@@ -149,8 +187,19 @@ impl RadixSort {
         for p in 0..passes(bits) {
             let (src, dst) = ((p % 2) as usize, ((p + 1) % 2) as usize);
             let pc = pc(p * RADIX_BITS);
-            rec.dispatch_indirect(&self.hist[w], &pc, &[b.meta.all(), b.keys[src].all(), b.hist.all()], args);
-            self.scan.record(rec, &b.scan, b.hist.all(), b.hist.all(), Count::Gpu(hist_len));
+            rec.dispatch_indirect(
+                &self.hist[w],
+                &pc,
+                &[b.meta.all(), b.keys[src].all(), b.hist.all()],
+                args,
+            );
+            self.scan.record(
+                rec,
+                &b.scan,
+                b.hist.all(),
+                b.hist.all(),
+                Count::Gpu(hist_len),
+            );
             rec.dispatch_indirect(
                 &self.scatter[w],
                 &pc,

@@ -42,7 +42,10 @@ impl<'a> Count<'a> {
             }
             Count::Gpu(s) => {
                 let align = rec.gpu().info.min_storage_buffer_offset_alignment;
-                assert!(s.offset % align == 0, "count slice {s:?} is not aligned to {align} bytes");
+                assert!(
+                    s.offset % align == 0,
+                    "count slice {s:?} is not aligned to {align} bytes"
+                );
                 s
             }
         }
@@ -115,15 +118,27 @@ impl PrefixSum {
         // A GPU count is only known to be <= capacity, so the slices must cover the capacity.
         let need = match count {
             Count::Host(n) => {
-                assert!(n <= s.capacity, "scan of {n} elements exceeds the scratch capacity {}", s.capacity);
+                assert!(
+                    n <= s.capacity,
+                    "scan of {n} elements exceeds the scratch capacity {}",
+                    s.capacity
+                );
                 n as u64 * 4
             }
             Count::Gpu(_) => s.capacity as u64 * 4,
         };
-        assert!(input.size >= need && output.size >= need, "scan {input:?} -> {output:?} smaller than {need} bytes");
+        assert!(
+            input.size >= need && output.size >= need,
+            "scan {input:?} -> {output:?} smaller than {need} bytes"
+        );
         let count = count.to_gpu(rec, s.count.slice(0, 4));
         let num_levels = s.levels.len() as u32 + 1;
-        let pc = |level| ScanParams { capacity: s.capacity, level, num_levels, pad: 0 };
+        let pc = |level| ScanParams {
+            capacity: s.capacity,
+            level,
+            num_levels,
+            pad: 0,
+        };
         let level_slice = |l: usize| -> BufSlice<'_> {
             let (off, cap) = s.levels[l - 1];
             s.partials.slice(off, cap as u64 * 4)
@@ -131,17 +146,34 @@ impl PrefixSum {
         let args = |l: u32| s.meta.slice((4 * l as u64 + 1) * 4, 12);
         rec.dispatch(&self.setup, &pc(0), &[count, s.meta.all()], [1, 1, 1]);
         for l in 0..num_levels - 1 {
-            let src = if l == 0 { input } else { level_slice(l as usize) };
+            let src = if l == 0 {
+                input
+            } else {
+                level_slice(l as usize)
+            };
             let dst = level_slice(l as usize + 1);
             rec.dispatch_indirect(&self.reduce, &pc(l), &[s.meta.all(), src, dst], args(l));
         }
         let top = num_levels - 1;
-        let (src, dst) = if top == 0 { (input, output) } else { (level_slice(top as usize), level_slice(top as usize)) };
+        let (src, dst) = if top == 0 {
+            (input, output)
+        } else {
+            (level_slice(top as usize), level_slice(top as usize))
+        };
         rec.dispatch(&self.top, &pc(top), &[s.meta.all(), src, dst], [1, 1, 1]);
         for l in (0..num_levels - 1).rev() {
-            let (src, dst) = if l == 0 { (input, output) } else { (level_slice(l as usize), level_slice(l as usize)) };
+            let (src, dst) = if l == 0 {
+                (input, output)
+            } else {
+                (level_slice(l as usize), level_slice(l as usize))
+            };
             let offsets = level_slice(l as usize + 1);
-            rec.dispatch_indirect(&self.down, &pc(l), &[s.meta.all(), src, offsets, dst], args(l));
+            rec.dispatch_indirect(
+                &self.down,
+                &pc(l),
+                &[s.meta.all(), src, offsets, dst],
+                args(l),
+            );
         }
     }
 }

@@ -15,7 +15,10 @@ pub fn sort_pairs_u64(keys: &[u64], vals: &[u32], bits: u32) -> (Vec<u64>, Vec<u
     let m = mask(bits);
     let mut idx: Vec<usize> = (0..keys.len()).collect();
     idx.sort_by_key(|&i| keys[i] & m); // slice::sort_by_key is stable
-    (idx.iter().map(|&i| keys[i]).collect(), idx.iter().map(|&i| vals[i]).collect())
+    (
+        idx.iter().map(|&i| keys[i]).collect(),
+        idx.iter().map(|&i| vals[i]).collect(),
+    )
 }
 
 /// As [`sort_pairs_u64`] for u32 keys.

@@ -37,7 +37,13 @@ impl<'a> BufSlice<'a> {
 
 impl std::fmt::Debug for BufSlice<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}[{}..{}]", self.buf.name, self.offset, self.offset + self.size)
+        write!(
+            f,
+            "{}[{}..{}]",
+            self.buf.name,
+            self.offset,
+            self.offset + self.size
+        )
     }
 }
 
@@ -52,7 +58,11 @@ impl Buffer {
 
     /// The whole buffer.
     pub fn all(&self) -> BufSlice<'_> {
-        BufSlice { buf: self, offset: 0, size: self.size }
+        BufSlice {
+            buf: self,
+            offset: 0,
+            size: self.size,
+        }
     }
 
     /// Bytes `[offset, offset + size)`.
@@ -63,7 +73,11 @@ impl Buffer {
             self.name,
             self.size
         );
-        BufSlice { buf: self, offset, size }
+        BufSlice {
+            buf: self,
+            offset,
+            size,
+        }
     }
 
     /// Elements `[first, first + count)` of a buffer of `T`.
@@ -80,7 +94,10 @@ impl Buffer {
     }
 
     fn mapped(&self) -> &[u8] {
-        self.alloc.as_ref().and_then(|a| a.mapped_slice()).expect("buffer is not host-visible")
+        self.alloc
+            .as_ref()
+            .and_then(|a| a.mapped_slice())
+            .expect("buffer is not host-visible")
     }
 }
 
@@ -108,27 +125,45 @@ impl Gpu {
         let dev = self.device();
         let raw = unsafe {
             dev.create_buffer(
-                &vk::BufferCreateInfo::default().size(size).usage(USAGE).sharing_mode(vk::SharingMode::EXCLUSIVE),
+                &vk::BufferCreateInfo::default()
+                    .size(size)
+                    .usage(USAGE)
+                    .sharing_mode(vk::SharingMode::EXCLUSIVE),
                 None,
             )?
         };
         let requirements = unsafe { dev.get_buffer_memory_requirements(raw) };
-        let alloc = self.shared.allocator.lock().unwrap().allocate(&AllocationCreateDesc {
-            name,
-            requirements,
-            location,
-            linear: true,
-            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-        });
+        let alloc = self
+            .shared
+            .allocator
+            .lock()
+            .unwrap()
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            });
         let alloc = match alloc {
             Ok(a) => a,
             Err(source) => {
                 unsafe { dev.destroy_buffer(raw, None) };
-                return Err(Error::Alloc { name: name.to_string(), bytes: size, source });
+                return Err(Error::Alloc {
+                    name: name.to_string(),
+                    bytes: size,
+                    source,
+                });
             }
         };
         unsafe { dev.bind_buffer_memory(raw, alloc.memory(), alloc.offset())? };
-        Ok(Buffer { shared: self.shared.clone(), raw, alloc: Some(alloc), size, name: name.to_string() })
+        Ok(Buffer {
+            shared: self.shared.clone(),
+            raw,
+            alloc: Some(alloc),
+            size,
+            name: name.to_string(),
+        })
     }
 
     /// Device-local buffer of `bytes` bytes (contents undefined).
@@ -148,14 +183,25 @@ impl Gpu {
     /// Copies `data` to the start of `dst` through a staging buffer (waits for completion).
     pub fn upload<T: Pod>(&self, dst: BufSlice<'_>, data: &[T]) -> Result<()> {
         let bytes: &[u8] = bytemuck::cast_slice(data);
-        assert!(bytes.len() as u64 <= dst.size, "upload of {} bytes into {dst:?}", bytes.len());
+        assert!(
+            bytes.len() as u64 <= dst.size,
+            "upload of {} bytes into {dst:?}",
+            bytes.len()
+        );
         if bytes.is_empty() {
             return Ok(());
         }
-        let mut staging = self.make_buffer("staging upload", bytes.len() as u64, MemoryLocation::CpuToGpu)?;
+        let mut staging = self.make_buffer(
+            "staging upload",
+            bytes.len() as u64,
+            MemoryLocation::CpuToGpu,
+        )?;
         staging.mapped_mut()[..bytes.len()].copy_from_slice(bytes);
         let mut rec = Recorder::new(self)?;
-        rec.copy(staging.slice(0, bytes.len() as u64), dst.buf.slice(dst.offset, bytes.len() as u64));
+        rec.copy(
+            staging.slice(0, bytes.len() as u64),
+            dst.buf.slice(dst.offset, bytes.len() as u64),
+        );
         rec.finish()?;
         Ok(())
     }
@@ -171,6 +217,8 @@ impl Gpu {
         let mut rec = Recorder::new(self)?;
         rec.copy(src.buf.slice(src.offset, bytes), staging.slice(0, bytes));
         rec.finish()?;
-        Ok(bytemuck::pod_collect_to_vec(&staging.mapped()[..bytes as usize]))
+        Ok(bytemuck::pod_collect_to_vec(
+            &staging.mapped()[..bytes as usize],
+        ))
     }
 }

@@ -38,7 +38,9 @@ impl GpuOptions {
         };
         GpuOptions {
             validation,
-            device: std::env::var("DISPFLOW_DEVICE").ok().filter(|s| !s.is_empty()),
+            device: std::env::var("DISPFLOW_DEVICE")
+                .ok()
+                .filter(|s| !s.is_empty()),
         }
     }
 }
@@ -71,7 +73,11 @@ pub struct DeviceInfo {
 
 impl std::fmt::Display for DeviceInfo {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} ({}, {}, Vulkan {})", self.name, self.kind, self.driver, self.api_version)
+        write!(
+            f,
+            "{} ({}, {}, Vulkan {})",
+            self.name, self.kind, self.driver, self.api_version
+        )
     }
 }
 
@@ -124,7 +130,9 @@ unsafe extern "system" fn debug_callback(
     let msg = if data.is_null() || (*data).p_message.is_null() {
         String::from("(no message)")
     } else {
-        CStr::from_ptr((*data).p_message).to_string_lossy().into_owned()
+        CStr::from_ptr((*data).p_message)
+            .to_string_lossy()
+            .into_owned()
     };
     let log = &*(user as *const Mutex<ValidationLog>);
     if let Ok(mut log) = log.lock() {
@@ -152,21 +160,35 @@ fn kind_name(t: vk::PhysicalDeviceType) -> (&'static str, u32) {
 }
 
 fn version(v: u32) -> String {
-    format!("{}.{}.{}", vk::api_version_major(v), vk::api_version_minor(v), vk::api_version_patch(v))
+    format!(
+        "{}.{}.{}",
+        vk::api_version_major(v),
+        vk::api_version_minor(v),
+        vk::api_version_patch(v)
+    )
 }
 
 /// Name and type of every physical device, in enumeration order (for `dispflow-vk devices`).
 pub fn list_devices() -> Result<Vec<(String, String)>> {
     let entry = unsafe { ash::Entry::load() }.map_err(|e| Error::Loader(e.to_string()))?;
     let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_2);
-    let instance = unsafe { entry.create_instance(&vk::InstanceCreateInfo::default().application_info(&app), None)? };
+    let instance = unsafe {
+        entry.create_instance(
+            &vk::InstanceCreateInfo::default().application_info(&app),
+            None,
+        )?
+    };
     let out = unsafe {
         let pds = instance.enumerate_physical_devices();
         let out = pds.map(|pds| {
             pds.iter()
                 .map(|&pd| {
                     let p = instance.get_physical_device_properties(pd);
-                    let name = p.device_name_as_c_str().unwrap_or(c"?").to_string_lossy().into_owned();
+                    let name = p
+                        .device_name_as_c_str()
+                        .unwrap_or(c"?")
+                        .to_string_lossy()
+                        .into_owned();
                     (name, kind_name(p.device_type).0.to_string())
                 })
                 .collect()
@@ -186,7 +208,9 @@ impl Gpu {
     pub fn new(opts: &GpuOptions) -> Result<Gpu> {
         let entry = unsafe { ash::Entry::load() }.map_err(|e| Error::Loader(e.to_string()))?;
         let layers = unsafe { entry.enumerate_instance_layer_properties()? };
-        let have_layer = layers.iter().any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER));
+        let have_layer = layers
+            .iter()
+            .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER));
         let validate = match opts.validation {
             Validation::Off => false,
             Validation::IfAvailable => {
@@ -209,12 +233,21 @@ impl Gpu {
         let app = vk::ApplicationInfo::default()
             .application_name(&app_name)
             .api_version(vk::API_VERSION_1_2);
-        let layer_ptrs: Vec<*const i8> = if validate { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
-        let ext_ptrs: Vec<*const i8> = if validate { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        let layer_ptrs: Vec<*const i8> = if validate {
+            vec![VALIDATION_LAYER.as_ptr()]
+        } else {
+            vec![]
+        };
+        let ext_ptrs: Vec<*const i8> = if validate {
+            vec![ash::ext::debug_utils::NAME.as_ptr()]
+        } else {
+            vec![]
+        };
         // Synchronisation validation is what catches a missing barrier on lavapipe, which runs
         // dispatches in order and would hide it.
         let enables = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
-        let mut features = vk::ValidationFeaturesEXT::default().enabled_validation_features(&enables);
+        let mut features =
+            vk::ValidationFeaturesEXT::default().enabled_validation_features(&enables);
         let mut ici = vk::InstanceCreateInfo::default()
             .application_info(&app)
             .enabled_layer_names(&layer_ptrs)
@@ -228,7 +261,8 @@ impl Gpu {
             let du = ash::ext::debug_utils::Instance::new(&entry, &instance);
             let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
                 .message_severity(
-                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                        | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
                 )
                 .message_type(
                     vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
@@ -254,7 +288,11 @@ impl Gpu {
         validate: bool,
         opts: &GpuOptions,
     ) -> Result<Gpu> {
-        let cleanup = |instance: &ash::Instance, debug: &Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>| unsafe {
+        let cleanup = |instance: &ash::Instance,
+                       debug: &Option<(
+            ash::ext::debug_utils::Instance,
+            vk::DebugUtilsMessengerEXT,
+        )>| unsafe {
             if let Some((du, m)) = debug {
                 du.destroy_debug_utils_messenger(*m, None);
             }
@@ -296,7 +334,13 @@ impl Gpu {
                     debug,
                     log,
                 });
-                Ok(Gpu { shared, queue: Mutex::new(queue), queue_family: qf, push_desc, info })
+                Ok(Gpu {
+                    shared,
+                    queue: Mutex::new(queue),
+                    queue_family: qf,
+                    push_desc,
+                    info,
+                })
             }
             Err(e) => {
                 cleanup(&instance, &debug);
@@ -316,24 +360,45 @@ impl Gpu {
         let mut cands = Vec::new();
         for (i, &pd) in pds.iter().enumerate() {
             let p = unsafe { instance.get_physical_device_properties(pd) };
-            let name = p.device_name_as_c_str().unwrap_or(c"?").to_string_lossy().into_owned();
+            let name = p
+                .device_name_as_c_str()
+                .unwrap_or(c"?")
+                .to_string_lossy()
+                .into_owned();
             let qfs = unsafe { instance.get_physical_device_queue_family_properties(pd) };
-            let qf = qfs.iter().position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE));
+            let qf = qfs
+                .iter()
+                .position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE));
             cands.push((i, pd, name, kind_name(p.device_type).1, qf));
         }
-        let list = cands.iter().map(|c| format!("{}: {}", c.0, c.2)).collect::<Vec<_>>().join(", ");
+        let list = cands
+            .iter()
+            .map(|c| format!("{}: {}", c.0, c.2))
+            .collect::<Vec<_>>()
+            .join(", ");
         let chosen = if let Some(sel) = &opts.device {
-            let by_index = sel.parse::<usize>().ok().and_then(|i| cands.iter().find(|c| c.0 == i));
-            let by_name = || cands.iter().find(|c| c.2.to_lowercase().contains(&sel.to_lowercase()));
-            by_index
-                .or_else(by_name)
-                .ok_or_else(|| Error::NoDevice(format!("DISPFLOW_DEVICE={sel:?} matches no device (have: {list})")))?
+            let by_index = sel
+                .parse::<usize>()
+                .ok()
+                .and_then(|i| cands.iter().find(|c| c.0 == i));
+            let by_name = || {
+                cands
+                    .iter()
+                    .find(|c| c.2.to_lowercase().contains(&sel.to_lowercase()))
+            };
+            by_index.or_else(by_name).ok_or_else(|| {
+                Error::NoDevice(format!(
+                    "DISPFLOW_DEVICE={sel:?} matches no device (have: {list})"
+                ))
+            })?
         } else {
             cands
                 .iter()
                 .filter(|c| c.4.is_some())
                 .min_by_key(|c| (c.3, c.0))
-                .ok_or_else(|| Error::NoDevice(format!("no device has a compute queue (have: {list})")))?
+                .ok_or_else(|| {
+                    Error::NoDevice(format!("no device has a compute queue (have: {list})"))
+                })?
         };
         let qf = chosen
             .4
@@ -349,12 +414,26 @@ impl Gpu {
     ) -> Result<(ash::Device, DeviceInfo)> {
         let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
         let mut driver = vk::PhysicalDeviceDriverProperties::default();
-        let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut subgroup).push_next(&mut driver);
+        let mut props2 = vk::PhysicalDeviceProperties2::default()
+            .push_next(&mut subgroup)
+            .push_next(&mut driver);
         unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
         let p = props2.properties;
-        let name = p.device_name_as_c_str().unwrap_or(c"?").to_string_lossy().into_owned();
-        let driver_name = driver.driver_info_as_c_str().unwrap_or(c"").to_string_lossy().into_owned();
-        let driver_id = driver.driver_name_as_c_str().unwrap_or(c"").to_string_lossy().into_owned();
+        let name = p
+            .device_name_as_c_str()
+            .unwrap_or(c"?")
+            .to_string_lossy()
+            .into_owned();
+        let driver_name = driver
+            .driver_info_as_c_str()
+            .unwrap_or(c"")
+            .to_string_lossy()
+            .into_owned();
+        let driver_id = driver
+            .driver_name_as_c_str()
+            .unwrap_or(c"")
+            .to_string_lossy()
+            .into_owned();
 
         let exts = unsafe { instance.enumerate_device_extension_properties(pd)? };
         let has_ext = |n: &CStr| exts.iter().any(|e| e.extension_name_as_c_str() == Ok(n));
@@ -364,7 +443,10 @@ impl Gpu {
             why,
         };
         if p.api_version < vk::API_VERSION_1_2 {
-            return Err(missing("Vulkan 1.2", "the kernels are compiled for the Vulkan 1.2 environment"));
+            return Err(missing(
+                "Vulkan 1.2",
+                "the kernels are compiled for the Vulkan 1.2 environment",
+            ));
         }
         if !has_ext(ash::khr::push_descriptor::NAME) {
             return Err(missing(
@@ -377,7 +459,9 @@ impl Gpu {
         let mut f11 = vk::PhysicalDeviceVulkan11Features::default();
         let has_atomic_ext = has_ext(ash::ext::shader_atomic_float::NAME);
         {
-            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f12).push_next(&mut f11);
+            let mut f2 = vk::PhysicalDeviceFeatures2::default()
+                .push_next(&mut f12)
+                .push_next(&mut f11);
             if has_atomic_ext {
                 f2 = f2.push_next(&mut atomic);
             }
@@ -393,7 +477,8 @@ impl Gpu {
         let ts_bits = qfp[qf as usize].timestamp_valid_bits;
 
         // Enable exactly what is used; optional features only where present.
-        let mut en_atomic = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default().shader_buffer_float32_atomic_add(true);
+        let mut en_atomic = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default()
+            .shader_buffer_float32_atomic_add(true);
         let mut en12 = vk::PhysicalDeviceVulkan12Features::default()
             .shader_float16(f12.shader_float16 == vk::TRUE)
             .shader_int8(f12.shader_int8 == vk::TRUE)
@@ -404,9 +489,14 @@ impl Gpu {
             .push_next(&mut en_atomic)
             .push_next(&mut en12)
             .push_next(&mut en11);
-        let dev_exts = [ash::khr::push_descriptor::NAME.as_ptr(), ash::ext::shader_atomic_float::NAME.as_ptr()];
+        let dev_exts = [
+            ash::khr::push_descriptor::NAME.as_ptr(),
+            ash::ext::shader_atomic_float::NAME.as_ptr(),
+        ];
         let prio = [1.0f32];
-        let qci = [vk::DeviceQueueCreateInfo::default().queue_family_index(qf).queue_priorities(&prio)];
+        let qci = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(qf)
+            .queue_priorities(&prio)];
         let dci = vk::DeviceCreateInfo::default()
             .queue_create_infos(&qci)
             .enabled_extension_names(&dev_exts)
@@ -416,7 +506,11 @@ impl Gpu {
         let ops = subgroup.supported_operations;
         let info = DeviceInfo {
             kind: kind_name(p.device_type).0.to_string(),
-            driver: if driver_name.is_empty() { driver_id } else { format!("{driver_id} {driver_name}") },
+            driver: if driver_name.is_empty() {
+                driver_id
+            } else {
+                format!("{driver_id} {driver_name}")
+            },
             api_version: version(p.api_version),
             subgroup_size: subgroup.subgroup_size,
             subgroup_arithmetic: ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
@@ -428,7 +522,8 @@ impl Gpu {
             max_storage_buffer_range: p.limits.max_storage_buffer_range,
             min_storage_buffer_offset_alignment: p.limits.min_storage_buffer_offset_alignment,
             max_push_constants: p.limits.max_push_constants_size,
-            timestamp_period_ns: (ts_bits > 0 && p.limits.timestamp_period > 0.0).then_some(p.limits.timestamp_period),
+            timestamp_period_ns: (ts_bits > 0 && p.limits.timestamp_period > 0.0)
+                .then_some(p.limits.timestamp_period),
             float_atomic_add: true,
             shader_float16: f12.shader_float16 == vk::TRUE,
             storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE,

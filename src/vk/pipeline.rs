@@ -72,15 +72,25 @@ impl Gpu {
         }
         let layout = unsafe { d.create_pipeline_layout(&pli, None)? };
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(info.spirv);
-        let module = unsafe { d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)? };
+        let module = unsafe {
+            d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)?
+        };
         let stage = vk::PipelineShaderStageCreateInfo::default()
             .stage(vk::ShaderStageFlags::COMPUTE)
             .module(module)
             .name(c"main");
-        let ci = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
+        let ci = [vk::ComputePipelineCreateInfo::default()
+            .stage(stage)
+            .layout(layout)];
         let res = unsafe { d.create_compute_pipelines(vk::PipelineCache::null(), &ci, None) };
         unsafe { d.destroy_shader_module(module, None) };
         let pipeline = res.map_err(|(_, e)| e)?[0];
-        Ok(ComputePipeline { shared: self.shared.clone(), info, pipeline, layout, set_layout })
+        Ok(ComputePipeline {
+            shared: self.shared.clone(),
+            info,
+            pipeline,
+            layout,
+            set_layout,
+        })
     }
 }

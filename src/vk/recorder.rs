@@ -23,7 +23,11 @@ struct Range {
 
 impl Range {
     fn of(s: &BufSlice<'_>) -> Range {
-        Range { buf: s.raw(), start: s.offset, end: s.offset + s.size }
+        Range {
+            buf: s.raw(),
+            start: s.offset,
+            end: s.offset + s.size,
+        }
     }
     fn overlaps(&self, o: &Range) -> bool {
         self.buf == o.buf && self.start < o.end && o.start < self.end
@@ -69,6 +73,7 @@ pub struct Recorder<'g> {
     zone: String,
     barriers: u32,
     dispatches: u32,
+    tracking: bool,
 }
 
 impl<'g> Recorder<'g> {
@@ -104,6 +109,7 @@ impl<'g> Recorder<'g> {
             zone: String::new(),
             barriers: 0,
             dispatches: 0,
+            tracking: true,
         };
         rec.cmd = unsafe {
             d.allocate_command_buffers(
@@ -116,7 +122,8 @@ impl<'g> Recorder<'g> {
         unsafe {
             d.begin_command_buffer(
                 rec.cmd,
-                &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                &vk::CommandBufferBeginInfo::default()
+                    .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
             )?
         };
         if timed {
@@ -148,11 +155,28 @@ impl<'g> Recorder<'g> {
         self.barriers
     }
 
+    /// Dispatches recorded so far.
+    pub fn dispatch_count(&self) -> u32 {
+        self.dispatches
+    }
+
+    /// Turns automatic barriers off. Only for the test proving that synchronisation validation
+    /// catches a missing barrier; never in real work.
+    #[doc(hidden)]
+    pub fn disable_hazard_tracking_for_tests(&mut self) {
+        self.tracking = false;
+    }
+
     /// Makes sure the next command sees `reads`/`writes` safely with respect to earlier ones.
     fn hazard(&mut self, reads: &[Range], writes: &[Range]) {
-        let raw_waw = reads.iter().chain(writes).any(|r| self.written.iter().any(|w| w.overlaps(r)));
-        let war = writes.iter().any(|w| self.read.iter().any(|r| r.overlaps(w)));
-        if raw_waw || war {
+        let raw_waw = reads
+            .iter()
+            .chain(writes)
+            .any(|r| self.written.iter().any(|w| w.overlaps(r)));
+        let war = writes
+            .iter()
+            .any(|w| self.read.iter().any(|r| r.overlaps(w)));
+        if (raw_waw || war) && self.tracking {
             self.barrier();
         }
         self.read.extend_from_slice(reads);
@@ -196,11 +220,18 @@ impl<'g> Recorder<'g> {
         if i >= MAX_TIMED {
             return None;
         }
-        self.labels.push(if self.zone.is_empty() { label.to_string() } else { format!("{}/{label}", self.zone) });
+        self.labels.push(if self.zone.is_empty() {
+            label.to_string()
+        } else {
+            format!("{}/{label}", self.zone)
+        });
         unsafe {
-            self.gpu
-                .device()
-                .cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, qp, 2 * i)
+            self.gpu.device().cmd_write_timestamp(
+                self.cmd,
+                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                qp,
+                2 * i,
+            )
         };
         Some(i)
     }
@@ -208,14 +239,22 @@ impl<'g> Recorder<'g> {
     fn time_end(&mut self, i: Option<u32>) {
         if let (Some(i), Some(qp)) = (i, self.queries) {
             unsafe {
-                self.gpu
-                    .device()
-                    .cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, qp, 2 * i + 1)
+                self.gpu.device().cmd_write_timestamp(
+                    self.cmd,
+                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                    qp,
+                    2 * i + 1,
+                )
             };
         }
     }
 
-    fn bind<P: Pod>(&mut self, p: &ComputePipeline, pc: &P, bindings: &[BufSlice<'_>]) -> Vec<Range> {
+    fn bind<P: Pod>(
+        &mut self,
+        p: &ComputePipeline,
+        pc: &P,
+        bindings: &[BufSlice<'_>],
+    ) -> Vec<Range> {
         let info = p.info;
         assert_eq!(
             bindings.len(),
@@ -226,7 +265,8 @@ impl<'g> Recorder<'g> {
             bindings.len()
         );
         assert!(
-            info.push_constant_size == 0 || std::mem::size_of::<P>() as u32 == info.push_constant_size,
+            info.push_constant_size == 0
+                || std::mem::size_of::<P>() as u32 == info.push_constant_size,
             "{}: push-constant struct is {} bytes, the shader's {} ({})",
             info.name,
             std::mem::size_of::<P>(),
@@ -235,7 +275,12 @@ impl<'g> Recorder<'g> {
         );
         let infos: Vec<vk::DescriptorBufferInfo> = bindings
             .iter()
-            .map(|b| vk::DescriptorBufferInfo::default().buffer(b.raw()).offset(b.offset).range(b.size))
+            .map(|b| {
+                vk::DescriptorBufferInfo::default()
+                    .buffer(b.raw())
+                    .offset(b.offset)
+                    .range(b.size)
+            })
             .collect();
         let writes: Vec<vk::WriteDescriptorSet> = info
             .bindings
@@ -265,18 +310,34 @@ impl<'g> Recorder<'g> {
         let d = self.gpu.device();
         unsafe {
             d.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, p.pipeline);
-            self.gpu
-                .push_desc
-                .cmd_push_descriptor_set(self.cmd, vk::PipelineBindPoint::COMPUTE, p.layout, 0, &writes);
+            self.gpu.push_desc.cmd_push_descriptor_set(
+                self.cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                p.layout,
+                0,
+                &writes,
+            );
             if info.push_constant_size > 0 {
-                d.cmd_push_constants(self.cmd, p.layout, vk::ShaderStageFlags::COMPUTE, 0, bytemuck::bytes_of(pc));
+                d.cmd_push_constants(
+                    self.cmd,
+                    p.layout,
+                    vk::ShaderStageFlags::COMPUTE,
+                    0,
+                    bytemuck::bytes_of(pc),
+                );
             }
         }
         reads
     }
 
     /// Dispatches `groups` workgroups.
-    pub fn dispatch<P: Pod>(&mut self, p: &ComputePipeline, pc: &P, bindings: &[BufSlice<'_>], groups: [u32; 3]) {
+    pub fn dispatch<P: Pod>(
+        &mut self,
+        p: &ComputePipeline,
+        pc: &P,
+        bindings: &[BufSlice<'_>],
+        groups: [u32; 3],
+    ) {
         self.bind(p, pc, bindings);
         let lim = self.gpu.info.max_workgroup_count;
         assert!(
@@ -286,7 +347,11 @@ impl<'g> Recorder<'g> {
         );
         let t = self.time_begin(p.info.name.rsplit('/').next().unwrap());
         if groups.iter().all(|&g| g > 0) {
-            unsafe { self.gpu.device().cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]) };
+            unsafe {
+                self.gpu
+                    .device()
+                    .cmd_dispatch(self.cmd, groups[0], groups[1], groups[2])
+            };
         }
         self.time_end(t);
         self.dispatches += 1;
@@ -314,13 +379,21 @@ impl<'g> Recorder<'g> {
         bindings: &[BufSlice<'_>],
         args: BufSlice<'_>,
     ) {
-        assert!(args.size >= 12 && args.offset % 4 == 0, "{}: bad indirect args {args:?}", p.info.name);
+        assert!(
+            args.size >= 12 && args.offset % 4 == 0,
+            "{}: bad indirect args {args:?}",
+            p.info.name
+        );
         let a = Range::of(&args.buf.slice(args.offset, 12));
         // The args are read by the indirect stage before the shader runs.
         self.hazard(&[a], &[]);
         self.bind(p, pc, bindings);
         let t = self.time_begin(p.info.name.rsplit('/').next().unwrap());
-        unsafe { self.gpu.device().cmd_dispatch_indirect(self.cmd, args.raw(), args.offset) };
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_dispatch_indirect(self.cmd, args.raw(), args.offset)
+        };
         self.time_end(t);
         self.dispatches += 1;
     }
@@ -329,26 +402,48 @@ impl<'g> Recorder<'g> {
     pub fn copy(&mut self, src: BufSlice<'_>, dst: BufSlice<'_>) {
         assert_eq!(src.size, dst.size, "copy {src:?} -> {dst:?}");
         self.hazard(&[Range::of(&src)], &[Range::of(&dst)]);
-        let region = vk::BufferCopy { src_offset: src.offset, dst_offset: dst.offset, size: src.size };
-        unsafe { self.gpu.device().cmd_copy_buffer(self.cmd, src.raw(), dst.raw(), &[region]) };
+        let region = vk::BufferCopy {
+            src_offset: src.offset,
+            dst_offset: dst.offset,
+            size: src.size,
+        };
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_copy_buffer(self.cmd, src.raw(), dst.raw(), &[region])
+        };
     }
 
     /// Fills `dst` (size a multiple of 4) with the 32-bit pattern `value`.
     pub fn fill(&mut self, dst: BufSlice<'_>, value: u32) {
         self.hazard(&[], &[Range::of(&dst)]);
-        unsafe { self.gpu.device().cmd_fill_buffer(self.cmd, dst.raw(), dst.offset, dst.size, value) };
+        unsafe {
+            self.gpu
+                .device()
+                .cmd_fill_buffer(self.cmd, dst.raw(), dst.offset, dst.size, value)
+        };
     }
 
     /// Writes a few words from the host inline in the command stream (at most 64 KiB).
     pub fn update(&mut self, dst: BufSlice<'_>, words: &[u32]) {
         let bytes = (words.len() * 4) as u64;
-        assert!(bytes <= dst.size && bytes <= 65536 && !words.is_empty(), "update {dst:?}");
-        let r = Range { buf: dst.raw(), start: dst.offset, end: dst.offset + bytes };
+        assert!(
+            bytes <= dst.size && bytes <= 65536 && !words.is_empty(),
+            "update {dst:?}"
+        );
+        let r = Range {
+            buf: dst.raw(),
+            start: dst.offset,
+            end: dst.offset + bytes,
+        };
         self.hazard(&[], &[r]);
         unsafe {
-            self.gpu
-                .device()
-                .cmd_update_buffer(self.cmd, dst.raw(), dst.offset, bytemuck::cast_slice(words))
+            self.gpu.device().cmd_update_buffer(
+                self.cmd,
+                dst.raw(),
+                dst.offset,
+                bytemuck::cast_slice(words),
+            )
         };
     }
 
@@ -386,7 +481,9 @@ impl<'g> Recorder<'g> {
             let n = self.labels.len();
             if n > 0 {
                 let mut raw = vec![0u64; 2 * n];
-                unsafe { d.get_query_pool_results(qp, 0, &mut raw, vk::QueryResultFlags::TYPE_64)? };
+                unsafe {
+                    d.get_query_pool_results(qp, 0, &mut raw, vk::QueryResultFlags::TYPE_64)?
+                };
                 for (i, l) in self.labels.drain(..).enumerate() {
                     let ticks = raw[2 * i + 1].wrapping_sub(raw[2 * i]);
                     t.entries.push((l, ticks as f64 * period as f64 * 1e-6));
