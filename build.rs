@@ -275,7 +275,7 @@ fn pointee_struct(m: &Module, var: u32) -> Option<u32> {
 
 fn access(m: &Module, var: u32) -> (bool, bool) {
     let has = |target: u32, d: Decoration| {
-        decorations(m, target).any(|i| i.operands.iter().any(|o| *o == Operand::Decoration(d)))
+        decorations(m, target).any(|i| i.operands.contains(&Operand::Decoration(d)))
     };
     let st = pointee_struct(m, var).unwrap_or(var);
     (

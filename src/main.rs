@@ -2,13 +2,23 @@
 
 mod cli;
 
+use anyhow::Context;
 use clap::Parser;
+use dispflow_vk::vk::Gpu;
 
 fn main() -> anyhow::Result<()> {
     let cli = cli::Cli::parse();
     match cli.command {
-        cli::Command::Devices => {}
-        cli::Command::Bench(_args) => {}
+        cli::Command::Devices => {
+            for (i, (name, kind)) in dispflow_vk::vk::list_devices()?.iter().enumerate() {
+                println!("{i}: {name} ({kind})");
+            }
+            let gpu = Gpu::new_default().context("opening the selected device")?;
+            println!("\nselected: {:#?}", gpu.info);
+        }
+        cli::Command::Bench(args) => {
+            dispflow_vk::bench::run(&args)?;
+        }
     }
     Ok(())
 }

@@ -4,9 +4,12 @@
 pub mod radix_sort;
 pub mod scan;
 
-/// (Rust struct name, size, [(field, offset)]) of every push-constant struct, for the
-/// reflection test that compares them with the SPIR-V.
-pub fn param_layouts() -> Vec<(&'static str, usize, Vec<(&'static str, usize)>)> {
+/// (Rust struct name, size in bytes, [(field, byte offset)]) of one push-constant struct.
+pub type ParamLayout = (&'static str, usize, Vec<(&'static str, usize)>);
+
+/// The layout of every push-constant struct, for the reflection test that compares them with
+/// the SPIR-V.
+pub fn param_layouts() -> Vec<ParamLayout> {
     macro_rules! layout {
         ($t:ty, $($f:ident),*) => {
             (last_ident(stringify!($t)), std::mem::size_of::<$t>(), vec![$((stringify!($f), std::mem::offset_of!($t, $f))),*])
