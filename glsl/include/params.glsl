@@ -20,3 +20,33 @@ struct SortParams {
 };
 
 #endif
+
+// src/kernels/raster.rs — camera and image shared by project, bin and project_bwd.
+struct ProjectParams {
+    vec4 rot0;        // rows of the world-to-camera rotation (OpenCV: x right, y down, z forward)
+    vec4 rot1;
+    vec4 rot2;
+    vec4 trans_near;  // xyz: p_cam = rot · p + trans; w: near plane
+    vec4 intrinsics;  // fx, fy, cx, cy (pixels; pixel centres at +0.5)
+    uint width;
+    uint height;
+    uint tiles_x;
+    uint tiles_y;
+    uint num_gaussians;
+    uint sh_coeffs;   // SH coefficients stored per Gaussian (1, 4, 9, 16)
+    uint sh_degree;   // active degree (<= sqrt(sh_coeffs) - 1)
+    uint isect_capacity;
+};
+
+// src/kernels/raster.rs — per-tile α-blending, forward and backward.
+struct BlendParams {
+    vec4 background;  // rgb; w unused
+    uint width;
+    uint height;
+    uint tiles_x;
+    uint tiles_y;
+    float alpha_max;  // 0.99 as in 3DGS (gsplat: 0.999)
+    uint num_gaussians;
+    uint pad0;
+    uint pad1;
+};

@@ -1,0 +1,145 @@
+// Shared rasteriser maths: layouts, camera, quaternion, spherical harmonics.
+#ifndef RASTER_GLSL
+#define RASTER_GLSL
+
+#define TILE 16
+// α below this is skipped; transmittance below T_STOP ends a pixel (3DGS/gsplat rules).
+#define ALPHA_MIN (1.0 / 255.0)
+#define T_STOP 1e-4
+#define DILATION 0.3
+
+// Per-Gaussian splat record written by `project`, read by blend (3 × vec4):
+//   [0] = (mean2d.x, mean2d.y, depth, opacity)   [1] = (conic a, b, c, radius)
+//   [2] = (r, g, b, 0)
+#define SPLAT_STRIDE 3
+
+// Per-Gaussian 2D gradient record accumulated by blend_bwd (stride 12 floats):
+//   0-1 mean2d, 2-4 conic (a, b, c), 5 opacity (after sigmoid), 6-8 colour, 9 depth, 10-11 unused
+#define G2D_STRIDE 12
+
+mat3 cam_rot(ProjectParams p) {
+    // GLSL matrices are column-major: build from rows, then transpose.
+    return transpose(mat3(p.rot0.xyz, p.rot1.xyz, p.rot2.xyz));
+}
+
+// Rotation matrix of a unit quaternion (w, x, y, z).
+mat3 quat_to_mat(vec4 q) {
+    float w = q.x, x = q.y, y = q.z, z = q.w;
+    return mat3(
+        vec3(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)),  // column 0
+        vec3(2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)),  // column 1
+        vec3(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y))); // column 2
+}
+
+// Normalised quaternion; a (near-)zero quaternion becomes the identity (its gradient is then 0).
+vec4 quat_normalize(vec4 q, out float len) {
+    len = length(q);
+    return len > 1e-12 ? q / len : vec4(1.0, 0.0, 0.0, 0.0);
+}
+
+float sigmoid(float x) {
+    // exp of a negative argument only: no overflow at ±30 or beyond.
+    return x >= 0.0 ? 1.0 / (1.0 + exp(-x)) : exp(x) / (1.0 + exp(x));
+}
+
+const float SH_C0 = 0.28209479177387814;
+const float SH_C1 = 0.4886025119029199;
+const float SH_C2[5] = float[5](1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
+                                -1.0925484305920792, 0.5462742152960396);
+const float SH_C3[7] = float[7](-0.5900435899266435, 2.890611442640554, -0.4570457994644658,
+                                0.3731763325901154, -0.4570457994644658, 1.445305721320277,
+                                -0.5900435899266435);
+
+// Real SH basis values for a unit direction, 3DGS ordering and signs; unused bands are 0.
+void sh_basis(vec3 d, uint degree, out float b[16]) {
+    for (int k = 0; k < 16; ++k) b[k] = 0.0;
+    b[0] = SH_C0;
+    if (degree < 1u) return;
+    float x = d.x, y = d.y, z = d.z;
+    b[1] = -SH_C1 * y;
+    b[2] = SH_C1 * z;
+    b[3] = -SH_C1 * x;
+    if (degree < 2u) return;
+    float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+    b[4] = SH_C2[0] * xy;
+    b[5] = SH_C2[1] * yz;
+    b[6] = SH_C2[2] * (2.0 * zz - xx - yy);
+    b[7] = SH_C2[3] * xz;
+    b[8] = SH_C2[4] * (xx - yy);
+    if (degree < 3u) return;
+    b[9] = SH_C3[0] * y * (3.0 * xx - yy);
+    b[10] = SH_C3[1] * xy * z;
+    b[11] = SH_C3[2] * y * (4.0 * zz - xx - yy);
+    b[12] = SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+    b[13] = SH_C3[4] * x * (4.0 * zz - xx - yy);
+    b[14] = SH_C3[5] * z * (xx - yy);
+    b[15] = SH_C3[6] * x * (xx - 3.0 * yy);
+}
+
+// Everything the forward projection computes that the backward needs again.
+struct Proj {
+    bool visible;
+    vec3 p;          // camera-space mean
+    float tx, ty;    // clamped x, y used in the Jacobian
+    bool clamp_x, clamp_y;
+    mat3 W;          // world-to-camera rotation
+    mat3 Rq;         // rotation of the Gaussian
+    vec4 qn;         // normalised quaternion
+    float qlen;
+    mat3 M;          // Rq · diag(scale)
+    mat3 Sc;         // camera-space 3D covariance
+    mat3 J;          // EWA Jacobian (third row zero)
+    vec3 cov2;       // dilated 2D covariance (xx, xy, yy)
+    float det;
+    vec3 conic;
+    vec2 mean2d;
+    float radius;
+    uvec4 rect;      // tiles [x0, y0, x1, y1)
+};
+
+Proj project_gaussian(ProjectParams pc, vec3 mean, vec3 scale, vec4 quat) {
+    Proj r;
+    r.visible = false;
+    r.W = cam_rot(pc);
+    r.p = r.W * mean + pc.trans_near.xyz;
+    r.rect = uvec4(0);
+    r.radius = 0.0;
+    // `!(z >= near)` also rejects NaN.
+    if (!(r.p.z >= pc.trans_near.w)) return r;
+    float fx = pc.intrinsics.x, fy = pc.intrinsics.y, cx = pc.intrinsics.z, cy = pc.intrinsics.w;
+    r.qn = quat_normalize(quat, r.qlen);
+    r.Rq = quat_to_mat(r.qn);
+    r.M = mat3(r.Rq[0] * scale.x, r.Rq[1] * scale.y, r.Rq[2] * scale.z);
+    mat3 S3 = r.M * transpose(r.M);
+    r.Sc = r.W * S3 * transpose(r.W);
+    float z = r.p.z;
+    float tanx = 0.5 * float(pc.width) / fx, tany = 0.5 * float(pc.height) / fy;
+    float lxp = (float(pc.width) - cx) / fx + 0.3 * tanx, lxn = cx / fx + 0.3 * tanx;
+    float lyp = (float(pc.height) - cy) / fy + 0.3 * tany, lyn = cy / fy + 0.3 * tany;
+    float ux = r.p.x / z, uy = r.p.y / z;
+    r.clamp_x = ux < -lxn || ux > lxp;
+    r.clamp_y = uy < -lyn || uy > lyp;
+    r.tx = z * clamp(ux, -lxn, lxp);
+    r.ty = z * clamp(uy, -lyn, lyp);
+    r.J = mat3(vec3(fx / z, 0.0, 0.0), vec3(0.0, fy / z, 0.0),
+               vec3(-fx * r.tx / (z * z), -fy * r.ty / (z * z), 0.0));
+    mat3 S2 = r.J * r.Sc * transpose(r.J);
+    r.cov2 = vec3(S2[0][0] + DILATION, S2[1][0], S2[1][1] + DILATION);
+    r.det = r.cov2.x * r.cov2.z - r.cov2.y * r.cov2.y;
+    if (!(r.det > 0.0) || isinf(r.det)) return r;
+    r.conic = vec3(r.cov2.z, -r.cov2.y, r.cov2.x) / r.det;
+    r.mean2d = vec2(fx * r.p.x / z + cx, fy * r.p.y / z + cy);
+    float mid = 0.5 * (r.cov2.x + r.cov2.z);
+    float lambda = mid + sqrt(max(0.1, mid * mid - r.det));
+    r.radius = ceil(3.0 * sqrt(lambda));
+    if (!(r.radius > 0.0) || any(isnan(r.mean2d)) || any(isinf(r.conic)) || any(isnan(r.conic))) return r;
+    // Clamp in float before converting: radii of huge Gaussians overflow an int.
+    vec2 lo = floor((r.mean2d - r.radius) / float(TILE));
+    vec2 hi = floor((r.mean2d + r.radius) / float(TILE)) + 1.0;
+    vec2 tiles = vec2(pc.tiles_x, pc.tiles_y);
+    r.rect = uvec4(clamp(lo, vec2(0.0), tiles), clamp(hi, vec2(0.0), tiles));
+    r.visible = r.rect.x < r.rect.z && r.rect.y < r.rect.w;
+    return r;
+}
+
+#endif

@@ -1,0 +1,55 @@
+#version 460
+// Per Gaussian: camera-space mean, EWA-projected and dilated 2D covariance, conic, screen
+// radius and tile rectangle, view-dependent SH colour and sigmoid opacity. Culled Gaussians
+// (behind the near plane, degenerate covariance, off screen) touch zero tiles.
+#extension GL_GOOGLE_include_directive : require
+#include "common.glsl"
+#include "params.glsl"
+#include "raster.glsl"
+
+layout(local_size_x = 256) in;
+
+layout(push_constant) uniform Push { ProjectParams pc; };
+layout(std430, binding = 0) readonly buffer Means { float means[]; };          // [N,3]
+layout(std430, binding = 1) readonly buffer Scales { float scales[]; };        // [N,3] linear
+layout(std430, binding = 2) readonly buffer Quats { vec4 quats[]; };           // [N] (w,x,y,z)
+layout(std430, binding = 3) readonly buffer Opacity { float logits[]; };       // [N]
+layout(std430, binding = 4) readonly buffer Sh { float sh[]; };                // [N,K,3]
+layout(std430, binding = 5) writeonly buffer Splats { vec4 splats[]; };        // [N,3]
+layout(std430, binding = 6) writeonly buffer Rects { uvec4 rects[]; };         // [N]
+layout(std430, binding = 7) writeonly buffer Counts { uint counts[]; };        // [N] tiles touched
+
+void main() {
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    if (i >= pc.num_gaussians) return;
+    vec3 mean = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+    vec3 scale = vec3(scales[3 * i], scales[3 * i + 1], scales[3 * i + 2]);
+    Proj r = project_gaussian(pc, mean, scale, quats[i]);
+    if (!r.visible) {
+        splats[SPLAT_STRIDE * i] = vec4(0.0);
+        splats[SPLAT_STRIDE * i + 1] = vec4(0.0);
+        splats[SPLAT_STRIDE * i + 2] = vec4(0.0);
+        rects[i] = uvec4(0);
+        counts[i] = 0;
+        return;
+    }
+    // View direction from the camera centre (-rotᵀ·trans); detached in the backward pass.
+    vec3 centre = -(transpose(r.W) * pc.trans_near.xyz);
+    vec3 dir = mean - centre;
+    float dl = length(dir);
+    dir = dl > 0.0 ? dir / dl : vec3(0.0, 0.0, 1.0);
+    float b[16];
+    sh_basis(dir, pc.sh_degree, b);
+    vec3 col = vec3(0.0);
+    uint nb = min((pc.sh_degree + 1u) * (pc.sh_degree + 1u), pc.sh_coeffs);
+    for (uint k = 0; k < nb; ++k) {
+        uint o = (i * pc.sh_coeffs + k) * 3u;
+        col += b[k] * vec3(sh[o], sh[o + 1], sh[o + 2]);
+    }
+    col = max(col + 0.5, vec3(0.0));
+    splats[SPLAT_STRIDE * i] = vec4(r.mean2d, r.p.z, sigmoid(logits[i]));
+    splats[SPLAT_STRIDE * i + 1] = vec4(r.conic, r.radius);
+    splats[SPLAT_STRIDE * i + 2] = vec4(col, 0.0);
+    rects[i] = r.rect;
+    counts[i] = (r.rect.z - r.rect.x) * (r.rect.w - r.rect.y);
+}
