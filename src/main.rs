@@ -9,6 +9,7 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         cli::Command::Devices => {}
         cli::Command::Bench(_args) => {}
+        cli::Command::Data(a) => dispflow_vk::data::cli::run(&a)?,
     }
     Ok(())
 }
