@@ -171,7 +171,7 @@ pub fn read_transforms(dir: &Path, split: &str) -> DataResult<Vec<BlenderFrame>>
     Ok(out)
 }
 
-fn load_frame(f: &BlenderFrame, time: f32, opts: &LoadOptions) -> DataResult<Frame> {
+fn load_frame(f: &BlenderFrame, time: f32, opts: &LoadOptions) -> DataResult<(Frame, u32)> {
     let image = img::load_rgb(&f.image, opts.background)?;
     let (w, h) = (image.width, image.height);
     for (want, got, name) in [(f.wh.0, w, "w"), (f.wh.1, h, "h")] {
@@ -226,7 +226,7 @@ fn load_frame(f: &BlenderFrame, time: f32, opts: &LoadOptions) -> DataResult<Fra
         }
     };
     let keep = opts.keep_pixels;
-    Ok(Frame {
+    let frame = Frame {
         id: f.file_path.clone(),
         image_path: f.image.clone(),
         camera,
@@ -241,7 +241,8 @@ fn load_frame(f: &BlenderFrame, time: f32, opts: &LoadOptions) -> DataResult<Fra
         },
         mask: mask.map(|m| if keep { m } else { Vec::new() }),
         flow: None,
-    })
+    };
+    Ok((frame, factor))
 }
 
 /// The validation split used: `test` when `transforms_test.json` exists, else `val`, else none.
@@ -294,7 +295,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> DataResult<Dataset> {
     }
 
     let pb = progress_bar(all.len() as u64, "loading frames", opts.progress);
-    let load_all = |frames: &[BlenderFrame]| -> DataResult<Vec<Frame>> {
+    let load_all = |frames: &[BlenderFrame]| -> DataResult<Vec<(Frame, u32)>> {
         frames
             .par_iter()
             .map(|f| {
@@ -307,11 +308,9 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> DataResult<Dataset> {
     let train_frames = load_all(&train)?;
     let val_frames = load_all(&val)?;
     pb.finish_and_clear();
-    let downscale = train_frames
-        .first()
-        .zip(train.first())
-        .and_then(|(f, b)| b.wh.0.map(|w| (w / f.camera.width.max(1)).max(1)))
-        .unwrap_or(1);
+    let downscale = train_frames.first().map(|f| f.1).unwrap_or(1);
+    let train_frames: Vec<Frame> = train_frames.into_iter().map(|f| f.0).collect();
+    let val_frames: Vec<Frame> = val_frames.into_iter().map(|f| f.0).collect();
 
     // Initial points and bounds.
     let centres: Vec<Vec3> = all.iter().map(|f| f.centre.as_vec3()).collect();

@@ -398,13 +398,18 @@ pub struct Rendered {
     pub flow: Vec<f32>,
 }
 
-/// Renders frame `k` of `n` at the given size.
+/// Renders frame `k` of `n` at the given size (camera of frame `k`, time `t_k`, flow towards
+/// `t_{k+1}`).
 pub fn render_frame(scene: &Scene, k: usize, n: usize, width: u32, height: u32) -> Rendered {
     let cam = GenCamera::for_frame(k, n, width, height);
     let dt = 1.0 / (n.max(2) - 1) as f64;
-    let t = k as f64 * dt;
-    let t2 = t + dt;
-    let (w, h) = (width as usize, height as usize);
+    render_view(scene, &cam, k as f64 * dt, (k + 1) as f64 * dt)
+}
+
+/// Renders the scene at time `t` from `cam`, with the scene flow towards `t_next` seen by the same
+/// camera.
+pub fn render_view(scene: &Scene, cam: &GenCamera, t: f64, t_next: f64) -> Rendered {
+    let (w, h) = (cam.width as usize, cam.height as usize);
     let mut rgb = vec![0.0f32; w * h * 3];
     let mut mask = vec![0u8; w * h];
     let mut flow = vec![0.0f32; w * h * 2];
@@ -420,7 +425,7 @@ pub fn render_frame(scene: &Scene, k: usize, n: usize, width: u32, height: u32) 
                 let p = match hit {
                     Hit::Rigid { p } | Hit::Blob { p } | Hit::Room { p, .. } => p,
                 };
-                let p2 = Scene::advect(&hit, t, t2);
+                let p2 = Scene::advect(&hit, t, t_next);
                 if let (Some(a), Some(b)) = (cam.project(p), cam.project(p2)) {
                     flow[o * 2] = (b.x - a.x) as f32;
                     flow[o * 2 + 1] = (b.y - a.y) as f32;
