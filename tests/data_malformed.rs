@@ -9,6 +9,9 @@ use std::path::Path;
 use dispflow_vk::data::{self, synthetic, LoadOptions};
 use serde_json::{json, Value};
 
+/// A named JSON edit and the substring its error must contain.
+type Edit = (&'static str, Box<dyn Fn(&mut Value)>, &'static str);
+
 /// One single-file mutation: the file's new bytes (`None` deletes it) and a substring the error
 /// message must contain.
 struct Variant {
@@ -256,7 +259,7 @@ fn malformed_nerfies_variants_all_give_errors() {
         }
     }
     // dataset.json semantics.
-    let ds_edits: Vec<(&str, Box<dyn Fn(&mut Value)>, &str)> = vec![
+    let ds_edits: Vec<Edit> = vec![
         ("ids number", Box::new(|v| v["ids"] = json!(5)), "ids"),
         ("ids empty", Box::new(|v| v["ids"] = json!([])), "ids"),
         (
@@ -308,7 +311,7 @@ fn malformed_nerfies_variants_all_give_errors() {
         ));
     }
     // metadata.json.
-    let md_edits: Vec<(&str, Box<dyn Fn(&mut Value)>, &str)> = vec![
+    let md_edits: Vec<Edit> = vec![
         (
             "entry missing",
             Box::new(|v| {
@@ -342,7 +345,7 @@ fn malformed_nerfies_variants_all_give_errors() {
         ));
     }
     // scene.json.
-    let sc_edits: Vec<(&str, Box<dyn Fn(&mut Value)>, &str)> = vec![
+    let sc_edits: Vec<Edit> = vec![
         (
             "scale string",
             Box::new(|v| v["scale"] = json!("x")),
@@ -496,7 +499,7 @@ fn malformed_blender_variants_all_give_errors() {
     ));
     broken_json(dir, t, &mut vs);
     broken_json(dir, "transforms_test.json", &mut vs);
-    let edits: Vec<(&str, Box<dyn Fn(&mut Value)>, &str)> = vec![
+    let edits: Vec<Edit> = vec![
         (
             "frames empty",
             Box::new(|v| v["frames"] = json!([])),

@@ -101,7 +101,7 @@ fn movingnerf_capture1_downscale_picks_rgb_8x() {
     let ds = data::load(&dir, &opts).unwrap();
     let c = &ds.train[0].camera;
     assert_eq!((c.width, c.height), (90, 160));
-    assert!((c.fx - 885.294_37 / 8.0).abs() < 1e-3);
+    assert!((c.fx - 885.294_4 / 8.0).abs() < 1e-3);
     assert!(ds.notes.iter().any(|n| n.contains("rgb/8x")));
 }
 
@@ -121,7 +121,7 @@ fn check_mujoco(name: &str) {
     let c0 = &full.train[0].camera;
     // transforms_train.json frame 0: fl_x 857.8027682038233, cx = cy = 400, w = h = 800.
     assert_eq!((c0.width, c0.height), (800, 800));
-    assert!((c0.fx - 857.802_77).abs() < 1e-3 && c0.cx == 400.0 && c0.cy == 400.0);
+    assert!((c0.fx - 857.802_8).abs() < 1e-3 && c0.cx == 400.0 && c0.cy == 400.0);
     assert!(full.frames().all(|f| f.mask.is_some()));
     assert!(full.train.len() > 100 && !full.val.is_empty());
     // Reduced resolution with pixels: masks label > 0 cover the objects.
@@ -135,7 +135,7 @@ fn check_mujoco(name: &str) {
     .unwrap();
     let f = &ds.train[0];
     assert_eq!((f.image.width, f.image.height), (200, 200));
-    assert!((f.camera.fx - 857.802_77 / 4.0).abs() < 1e-3);
+    assert!((f.camera.fx - 857.802_8 / 4.0).abs() < 1e-3);
     let m = f.mask.as_ref().unwrap();
     let frac = m.iter().map(|&v| v as f32).sum::<f32>() / m.len() as f32;
     assert!(frac > 0.001 && frac < 0.5, "moving fraction {frac}");

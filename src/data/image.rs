@@ -170,11 +170,11 @@ pub fn undistort(img: &Image, k: Intrinsics, dist: &Distortion, background: [f32
             let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
             let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
             let (ax, ay) = ((fx - x0 as f64) as f32, (fy - y0 as f64) as f32);
-            for c in 0..3 {
+            for (c, out) in px.iter_mut().enumerate() {
                 let at = |x: usize, y: usize| img.data[(y * w + x) * 3 + c];
                 let top = at(x0, y0) * (1.0 - ax) + at(x1, y0) * ax;
                 let bot = at(x0, y1) * (1.0 - ax) + at(x1, y1) * ax;
-                px[c] = top * (1.0 - ay) + bot * ay;
+                *out = top * (1.0 - ay) + bot * ay;
             }
         }
     });

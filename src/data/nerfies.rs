@@ -708,15 +708,13 @@ fn initial_points(
         .find(|p| p.is_file());
     let pref = opts.points;
     let mut chosen: Option<InitPoints> = None;
-    if matches!(pref, PointsPreference::Auto | PointsPreference::Npy) {
-        if npy.is_file() || pref == PointsPreference::Npy {
-            let pts = points::read_points_npy(&npy)?;
-            chosen = Some(InitPoints {
-                positions: normalise_all(scene, &pts),
-                colors: None,
-                source: PointSource::Npy(npy.clone()),
-            });
-        }
+    if (pref == PointsPreference::Auto && npy.is_file()) || pref == PointsPreference::Npy {
+        let pts = points::read_points_npy(&npy)?;
+        chosen = Some(InitPoints {
+            positions: normalise_all(scene, &pts),
+            colors: None,
+            source: PointSource::Npy(npy.clone()),
+        });
     }
     if chosen.is_none() && matches!(pref, PointsPreference::Auto | PointsPreference::Colmap) {
         match colmap_dir(dir) {

@@ -427,15 +427,15 @@ fn jacobi4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
                 let t = if theta == 0.0 { 1.0 } else { t };
                 let c = 1.0 / (t * t + 1.0).sqrt();
                 let s = t * c;
-                for k in 0..4 {
-                    let (akp, akq) = (a[k][p], a[k][q]);
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
+                for row in a.iter_mut() {
+                    let (akp, akq) = (row[p], row[q]);
+                    row[p] = c * akp - s * akq;
+                    row[q] = s * akp + c * akq;
                 }
+                let (rp, rq) = (a[p], a[q]);
                 for k in 0..4 {
-                    let (apk, aqk) = (a[p][k], a[q][k]);
-                    a[p][k] = c * apk - s * aqk;
-                    a[q][k] = s * apk + c * aqk;
+                    a[p][k] = c * rp[k] - s * rq[k];
+                    a[q][k] = s * rp[k] + c * rq[k];
                 }
                 for row in v.iter_mut() {
                     let (vp, vq) = (row[p], row[q]);
@@ -451,9 +451,12 @@ fn jacobi4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
 // ---------------------------------------------------------------------------------------------
 // PLY
 
+/// Positions and optional colours read from a point file.
+pub type PointsAndColors = (Vec<DVec3>, Option<Vec<[f32; 3]>>);
+
 /// Reads the `vertex` element of a PLY file (ascii or binary): positions and colours when the
 /// file has `red green blue` properties.
-pub fn read_ply(path: &Path) -> DataResult<(Vec<DVec3>, Option<Vec<[f32; 3]>>)> {
+pub fn read_ply(path: &Path) -> DataResult<PointsAndColors> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
     let bad = |msg: String| DataError::file(path, msg);
     let end = b"end_header";
