@@ -22,4 +22,6 @@ pub enum Command {
     Devices,
     /// Time the GPU kernels (sort, scan) with GPU timestamps and print a table.
     Bench(dispflow_vk::bench::BenchArgs),
+    /// Generate or check datasets.
+    Data(dispflow_vk::data::cli::DataArgs),
 }

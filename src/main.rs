@@ -19,6 +19,7 @@ fn main() -> anyhow::Result<()> {
         cli::Command::Bench(args) => {
             dispflow_vk::bench::run(&args)?;
         }
+        cli::Command::Data(a) => dispflow_vk::data::cli::run(&a)?,
     }
     Ok(())
 }
