@@ -37,6 +37,19 @@ vec4 quat_normalize(vec4 q, out float len) {
     return len > 1e-12 ? q / len : vec4(1.0, 0.0, 0.0, 0.0);
 }
 
+// ∂L/∂q for R(q) = quat_to_mat(q), q = (w, x, y, z), given gR with gR[col][row] = ∂L/∂R_row,col.
+vec4 quat_to_mat_grad(vec4 q, mat3 gR) {
+    float w = q.x, x = q.y, y = q.z, z = q.w;
+    float g00 = gR[0][0], g01 = gR[1][0], g02 = gR[2][0];
+    float g10 = gR[0][1], g11 = gR[1][1], g12 = gR[2][1];
+    float g20 = gR[0][2], g21 = gR[1][2], g22 = gR[2][2];
+    return 2.0 * vec4(
+        -z * g01 + y * g02 + z * g10 - x * g12 - y * g20 + x * g21,
+        y * g01 + z * g02 + y * g10 - 2.0 * x * g11 - w * g12 + z * g20 + w * g21 - 2.0 * x * g22,
+        -2.0 * y * g00 + x * g01 + w * g02 + x * g10 + z * g12 - w * g20 + z * g21 - 2.0 * y * g22,
+        -2.0 * z * g00 - w * g01 + x * g02 + w * g10 - 2.0 * z * g11 + y * g12 + x * g20 + y * g21);
+}
+
 float sigmoid(float x) {
     // exp of a negative argument only: no overflow at ±30 or beyond.
     return x >= 0.0 ? 1.0 / (1.0 + exp(-x)) : exp(x) / (1.0 + exp(x));

@@ -2,6 +2,7 @@
 //! `glsl/include/params.glsl`, pipelines built once, `record()` taking explicit buffers.
 
 pub mod radix_sort;
+pub mod raster;
 pub mod scan;
 
 /// (Rust struct name, size in bytes, [(field, byte offset)]) of one push-constant struct.
@@ -18,6 +19,34 @@ pub fn param_layouts() -> Vec<ParamLayout> {
     vec![
         layout!(scan::ScanParams, capacity, level, num_levels, pad),
         layout!(radix_sort::SortParams, capacity, shift, digit_mask, pad),
+        layout!(
+            raster::ProjectParams,
+            rot0,
+            rot1,
+            rot2,
+            trans_near,
+            intrinsics,
+            width,
+            height,
+            tiles_x,
+            tiles_y,
+            num_gaussians,
+            sh_coeffs,
+            sh_degree,
+            isect_capacity
+        ),
+        layout!(
+            raster::BlendParams,
+            background,
+            width,
+            height,
+            tiles_x,
+            tiles_y,
+            alpha_max,
+            num_gaussians,
+            pad0,
+            pad1
+        ),
     ]
 }
 

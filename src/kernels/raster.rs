@@ -1,0 +1,539 @@
+//! The differentiable tile rasteriser (`glsl/raster/*.comp`). CPU twin: `reference::raster`.
+//!
+//! Forward: `project` → scan of tiles touched → `bin_total` → `bin_emit` ((tile | depth) keys)
+//! → radix sort (only `32 + tile_bits` bits) → `bin_ranges` → `blend_fwd`.
+//! Backward: `blend_bwd` (accumulates per-splat 2D gradients) → `project_bwd`.
+//! Nothing is read back inside a pass; the intersection count drives the sort and the range
+//! pass on the GPU. Overflow of the intersection capacity is detected after the submit
+//! (`RasterBuffers::intersections`) and `render_checked` re-runs with grown buffers, so a splat
+//! is never dropped silently.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
+use super::scan::{Count, PrefixSum, ScanScratch};
+use crate::error::{Error, Result};
+use crate::shaders;
+use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
+
+/// Tile edge in pixels (mirrors `TILE` in glsl/include/raster.glsl).
+pub const TILE: u32 = 16;
+/// vec4s per splat record (mirrors `SPLAT_STRIDE`).
+pub const SPLAT_STRIDE: u64 = 3;
+/// Floats per 2D gradient record (mirrors `G2D_STRIDE`): mean2d 2, conic 3, opacity 1,
+/// colour 3, depth 1, unused 2.
+pub const G2D_STRIDE: u64 = 12;
+/// Feature-channel counts with a compiled blend variant (0: none, 2: Gaussian flow,
+/// 3: displacement flow).
+pub const FEATURE_DIMS: [u32; 3] = [0, 2, 3];
+
+/// Pinhole camera with principal point; world-to-camera `p_cam = rot · p + trans`, OpenCV axes
+/// (x right, y down, z forward). Pixel centres at (x + 0.5, y + 0.5).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub rot: [[f32; 3]; 3],
+    pub trans: [f32; 3],
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    pub width: u32,
+    pub height: u32,
+    pub near: f32,
+}
+
+impl Camera {
+    pub fn tiles(&self) -> (u32, u32) {
+        (self.width.div_ceil(TILE), self.height.div_ceil(TILE))
+    }
+}
+
+/// Mirrors `ProjectParams` in glsl/include/params.glsl (checked by tests/layout.rs).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct ProjectParams {
+    pub rot0: [f32; 4],
+    pub rot1: [f32; 4],
+    pub rot2: [f32; 4],
+    pub trans_near: [f32; 4],
+    pub intrinsics: [f32; 4],
+    pub width: u32,
+    pub height: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub num_gaussians: u32,
+    pub sh_coeffs: u32,
+    pub sh_degree: u32,
+    pub isect_capacity: u32,
+}
+
+/// Mirrors `BlendParams` in glsl/include/params.glsl (checked by tests/layout.rs).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct BlendParams {
+    pub background: [f32; 4],
+    pub width: u32,
+    pub height: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub alpha_max: f32,
+    pub num_gaussians: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+}
+
+/// Blend options.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderOpts {
+    pub background: [f32; 3],
+    /// α clamp: 0.99 as in 3DGS; gsplat uses 0.999.
+    pub alpha_max: f32,
+}
+
+impl Default for RenderOpts {
+    fn default() -> Self {
+        RenderOpts {
+            background: [0.0; 3],
+            alpha_max: 0.99,
+        }
+    }
+}
+
+/// The Gaussians to render, already deformed: `means` [N,3], `scales` [N,3] (linear),
+/// `quats` [N,4] (w, x, y, z; unnormalised), `opacity_logits` [N], `sh` [N, sh_coeffs, 3],
+/// and optionally `features` [N, feature_dims] blended with the same weights.
+#[derive(Clone, Copy, Debug)]
+pub struct SplatInputs<'a> {
+    pub n: u32,
+    pub means: BufSlice<'a>,
+    pub scales: BufSlice<'a>,
+    pub quats: BufSlice<'a>,
+    pub opacity_logits: BufSlice<'a>,
+    pub sh: BufSlice<'a>,
+    pub sh_coeffs: u32,
+    pub sh_degree: u32,
+    pub features: Option<BufSlice<'a>>,
+}
+
+/// Upstream gradients of the forward outputs: `rgba` [H·W,4], `depth` [H·W],
+/// `features` [H·W, feature_dims].
+#[derive(Clone, Copy, Debug)]
+pub struct OutputGrads<'a> {
+    pub rgba: BufSlice<'a>,
+    pub depth: BufSlice<'a>,
+    pub features: Option<BufSlice<'a>>,
+}
+
+/// Every buffer the rasteriser needs for `max_gaussians` splats at one image size, allocated
+/// once. Outputs (`out_*`) and gradients (`d_*`) are public for the caller to read or chain.
+pub struct RasterBuffers {
+    pub max_gaussians: u32,
+    pub width: u32,
+    pub height: u32,
+    pub feature_dims: u32,
+    pub sh_coeffs: u32,
+    isect_capacity: u32,
+    pub splats: Buffer,
+    rects: Buffer,
+    counts: Buffer,
+    offsets: Buffer,
+    meta: Buffer,
+    scan: ScanScratch,
+    sort: SortBuffers,
+    ranges: Buffer,
+    /// [H·W] vec4: rgb (background included) and alpha = 1 − T.
+    pub out_rgba: Buffer,
+    /// [H·W] Σ w_i z_i (not normalised by alpha).
+    pub out_depth: Buffer,
+    pub final_t: Buffer,
+    pub n_contrib: Buffer,
+    /// [H·W, feature_dims]
+    pub out_features: Buffer,
+    /// [N, 12] per-splat 2D gradients (see `G2D_STRIDE`), accumulated by blend_bwd.
+    pub grad2d: Buffer,
+    /// [N, feature_dims]
+    pub d_features: Buffer,
+    pub d_means: Buffer,
+    pub d_scales: Buffer,
+    pub d_quats: Buffer,
+    pub d_opacity_logits: Buffer,
+    pub d_sh: Buffer,
+}
+
+impl RasterBuffers {
+    pub fn isect_capacity(&self) -> u32 {
+        self.isect_capacity
+    }
+
+    /// Tile intersections the last forward pass needed (read after its submit). Larger than
+    /// `isect_capacity()` means the pass overflowed and must be re-run with grown buffers.
+    pub fn intersections(&self, gpu: &Gpu) -> Result<u32> {
+        Ok(gpu.read::<u32>(self.meta.elems::<u32>(1, 1))?[0])
+    }
+}
+
+fn sort_bits(cam: &Camera) -> u32 {
+    let (tx, ty) = cam.tiles();
+    let tiles = (tx * ty).max(2);
+    32 + (32 - (tiles - 1).leading_zeros())
+}
+
+/// Workgroups for one invocation per element with 256-wide workgroups (2D past 32768).
+fn grid(n: u32) -> [u32; 3] {
+    let groups = n.div_ceil(256);
+    let gx = groups.clamp(1, 32768);
+    [gx, groups.div_ceil(gx).max(1), 1]
+}
+
+pub struct Rasterizer {
+    project: ComputePipeline,
+    bin_total: ComputePipeline,
+    bin_emit: ComputePipeline,
+    bin_ranges: ComputePipeline,
+    blend_fwd: [ComputePipeline; 3],
+    blend_bwd: [ComputePipeline; 3],
+    project_bwd: ComputePipeline,
+    scan: PrefixSum,
+    sort: RadixSort,
+}
+
+fn variant(feature_dims: u32) -> Result<usize> {
+    FEATURE_DIMS.iter().position(|&k| k == feature_dims).ok_or_else(|| {
+        Error::Invalid(format!("feature_dims = {feature_dims}: the blend kernels are compiled for {FEATURE_DIMS:?}"))
+    })
+}
+
+impl Rasterizer {
+    pub fn new(gpu: &Gpu) -> Result<Self> {
+        if !gpu.info.subgroup_arithmetic {
+            return Err(Error::MissingFeature {
+                device: gpu.info.name.clone(),
+                feature: "subgroup arithmetic (VK_SUBGROUP_FEATURE_ARITHMETIC_BIT)",
+                why: "blend_bwd folds per-pixel gradients with subgroupAdd before its atomics",
+            });
+        }
+        use shaders::raster as r;
+        Ok(Rasterizer {
+            project: gpu.pipeline(&r::PROJECT)?,
+            bin_total: gpu.pipeline(&r::BIN_TOTAL)?,
+            bin_emit: gpu.pipeline(&r::BIN_EMIT)?,
+            bin_ranges: gpu.pipeline(&r::BIN_RANGES)?,
+            blend_fwd: [
+                gpu.pipeline(&r::BLEND_FWD_F0)?,
+                gpu.pipeline(&r::BLEND_FWD_F2)?,
+                gpu.pipeline(&r::BLEND_FWD_F3)?,
+            ],
+            blend_bwd: [
+                gpu.pipeline(&r::BLEND_BWD_F0)?,
+                gpu.pipeline(&r::BLEND_BWD_F2)?,
+                gpu.pipeline(&r::BLEND_BWD_F3)?,
+            ],
+            project_bwd: gpu.pipeline(&r::PROJECT_BWD)?,
+            scan: PrefixSum::new(gpu)?,
+            sort: RadixSort::new(gpu)?,
+        })
+    }
+
+    /// Buffers for up to `max_gaussians` splats on a `width`×`height` image with
+    /// `isect_capacity` tile intersections (grown by `render_checked` when exceeded).
+    pub fn buffers(
+        &self,
+        gpu: &Gpu,
+        max_gaussians: u32,
+        width: u32,
+        height: u32,
+        sh_coeffs: u32,
+        feature_dims: u32,
+        isect_capacity: u32,
+    ) -> Result<RasterBuffers> {
+        variant(feature_dims)?;
+        if !matches!(sh_coeffs, 1 | 4 | 9 | 16) {
+            return Err(Error::Invalid(format!(
+                "sh_coeffs = {sh_coeffs}: expected 1, 4, 9 or 16 (degree 0–3)"
+            )));
+        }
+        let n = max_gaussians.max(1) as u64;
+        let px = (width as u64 * height as u64).max(1);
+        let tiles = (width.div_ceil(TILE) as u64 * height.div_ceil(TILE) as u64).max(1);
+        let k = feature_dims as u64;
+        let f = 4u64;
+        Ok(RasterBuffers {
+            max_gaussians,
+            width,
+            height,
+            feature_dims,
+            sh_coeffs,
+            isect_capacity: isect_capacity.max(1),
+            splats: gpu.buffer("raster splats", n * SPLAT_STRIDE * 16)?,
+            rects: gpu.buffer("raster tile rects", n * 16)?,
+            counts: gpu.buffer("raster tile counts", n * 4)?,
+            offsets: gpu.buffer("raster tile offsets", n * 4)?,
+            meta: gpu.buffer("raster bin meta", 256)?,
+            scan: self.scan.scratch(gpu, n as u32)?,
+            sort: self.sort.buffers(
+                gpu,
+                "raster intersections",
+                isect_capacity.max(1),
+                KeyWidth::U64,
+            )?,
+            ranges: gpu.buffer("raster tile ranges", tiles * 8)?,
+            out_rgba: gpu.buffer("raster out rgba", px * 16)?,
+            out_depth: gpu.buffer("raster out depth", px * f)?,
+            final_t: gpu.buffer("raster final T", px * f)?,
+            n_contrib: gpu.buffer("raster contributors", px * 4)?,
+            out_features: gpu.buffer("raster out features", px * k.max(1) * f)?,
+            grad2d: gpu.buffer("raster 2D gradients", n * G2D_STRIDE * f)?,
+            d_features: gpu.buffer("raster feature gradients", n * k.max(1) * f)?,
+            d_means: gpu.buffer("raster d means", n * 3 * f)?,
+            d_scales: gpu.buffer("raster d scales", n * 3 * f)?,
+            d_quats: gpu.buffer("raster d quats", n * 4 * f)?,
+            d_opacity_logits: gpu.buffer("raster d opacity logits", n * f)?,
+            d_sh: gpu.buffer("raster d sh", n * sh_coeffs as u64 * 3 * f)?,
+        })
+    }
+
+    fn check(b: &RasterBuffers, cam: &Camera, g: &SplatInputs<'_>) {
+        assert!(
+            g.n <= b.max_gaussians,
+            "{} Gaussians exceed the buffers' {}",
+            g.n,
+            b.max_gaussians
+        );
+        assert_eq!(
+            (cam.width, cam.height),
+            (b.width, b.height),
+            "camera size differs from the buffers'"
+        );
+        assert_eq!(
+            g.sh_coeffs, b.sh_coeffs,
+            "sh_coeffs differs from the buffers'"
+        );
+        assert!(
+            g.sh_degree <= 3 && (g.sh_degree + 1).pow(2) <= g.sh_coeffs,
+            "sh_degree {}",
+            g.sh_degree
+        );
+        assert_eq!(
+            g.features.is_some(),
+            b.feature_dims > 0,
+            "features given iff feature_dims > 0"
+        );
+    }
+
+    fn project_params(b: &RasterBuffers, cam: &Camera, g: &SplatInputs<'_>) -> ProjectParams {
+        let (tiles_x, tiles_y) = cam.tiles();
+        let row = |r: [f32; 3]| [r[0], r[1], r[2], 0.0];
+        ProjectParams {
+            rot0: row(cam.rot[0]),
+            rot1: row(cam.rot[1]),
+            rot2: row(cam.rot[2]),
+            trans_near: [cam.trans[0], cam.trans[1], cam.trans[2], cam.near],
+            intrinsics: [cam.fx, cam.fy, cam.cx, cam.cy],
+            width: cam.width,
+            height: cam.height,
+            tiles_x,
+            tiles_y,
+            num_gaussians: g.n,
+            sh_coeffs: g.sh_coeffs,
+            sh_degree: g.sh_degree,
+            isect_capacity: b.isect_capacity,
+        }
+    }
+
+    fn blend_params(cam: &Camera, g: &SplatInputs<'_>, o: &RenderOpts) -> BlendParams {
+        let (tiles_x, tiles_y) = cam.tiles();
+        BlendParams {
+            background: [o.background[0], o.background[1], o.background[2], 0.0],
+            width: cam.width,
+            height: cam.height,
+            tiles_x,
+            tiles_y,
+            alpha_max: o.alpha_max,
+            num_gaussians: g.n,
+            pad0: 0,
+            pad1: 0,
+        }
+    }
+
+    /// Records the forward pass into `b.out_*`.
+    pub fn forward(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+        o: &RenderOpts,
+    ) {
+        Self::check(b, cam, g);
+        let pp = Self::project_params(b, cam, g);
+        let bits = sort_bits(cam);
+        rec.dispatch(
+            &self.project,
+            &pp,
+            &[
+                g.means,
+                g.scales,
+                g.quats,
+                g.opacity_logits,
+                g.sh,
+                b.splats.all(),
+                b.rects.all(),
+                b.counts.all(),
+            ],
+            grid(g.n),
+        );
+        self.scan.record(
+            rec,
+            &b.scan,
+            b.counts.all(),
+            b.offsets.all(),
+            Count::Host(g.n),
+        );
+        rec.dispatch(
+            &self.bin_total,
+            &pp,
+            &[b.offsets.all(), b.counts.all(), b.meta.all()],
+            [1, 1, 1],
+        );
+        rec.dispatch(
+            &self.bin_emit,
+            &pp,
+            &[
+                b.splats.all(),
+                b.rects.all(),
+                b.offsets.all(),
+                b.sort.keys[0].all(),
+                b.sort.vals[0].all(),
+            ],
+            grid(g.n),
+        );
+        let out = self
+            .sort
+            .record(rec, &b.sort, Count::Gpu(b.meta.slice(0, 4)), bits);
+        debug_assert_eq!(out, (passes(bits) % 2) as usize);
+        rec.fill(b.ranges.all(), 0);
+        rec.dispatch_indirect(
+            &self.bin_ranges,
+            &pp,
+            &[b.meta.all(), b.sort.keys[out].all(), b.ranges.all()],
+            b.meta.slice(16, 12),
+        );
+        let bp = Self::blend_params(cam, g, o);
+        let (tx, ty) = cam.tiles();
+        let mut binds = vec![
+            b.ranges.all(),
+            b.sort.vals[out].all(),
+            b.splats.all(),
+            b.out_rgba.all(),
+            b.out_depth.all(),
+            b.final_t.all(),
+            b.n_contrib.all(),
+        ];
+        if let Some(f) = g.features {
+            binds.extend([f, b.out_features.all()]);
+        }
+        rec.dispatch(
+            &self.blend_fwd[variant(b.feature_dims).unwrap()],
+            &bp,
+            &binds,
+            [tx.max(1), ty.max(1), 1],
+        );
+    }
+
+    /// Records the backward pass of the last `forward` (same inputs): `b.grad2d`,
+    /// `b.d_features` and the 3D gradients `b.d_*`.
+    pub fn backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+        o: &RenderOpts,
+        d: &OutputGrads<'_>,
+    ) {
+        Self::check(b, cam, g);
+        assert_eq!(
+            d.features.is_some(),
+            b.feature_dims > 0,
+            "feature gradients given iff feature_dims > 0"
+        );
+        let out = (passes(sort_bits(cam)) % 2) as usize;
+        let bp = Self::blend_params(cam, g, o);
+        let (tx, ty) = cam.tiles();
+        rec.fill(b.grad2d.all(), 0);
+        let mut binds = vec![
+            b.ranges.all(),
+            b.sort.vals[out].all(),
+            b.splats.all(),
+            b.final_t.all(),
+            b.n_contrib.all(),
+            d.rgba,
+            d.depth,
+            b.grad2d.all(),
+        ];
+        if let (Some(f), Some(df)) = (g.features, d.features) {
+            rec.fill(b.d_features.all(), 0);
+            binds.extend([f, df, b.d_features.all()]);
+        }
+        rec.dispatch(
+            &self.blend_bwd[variant(b.feature_dims).unwrap()],
+            &bp,
+            &binds,
+            [tx.max(1), ty.max(1), 1],
+        );
+        let pp = Self::project_params(b, cam, g);
+        rec.dispatch(
+            &self.project_bwd,
+            &pp,
+            &[
+                g.means,
+                g.scales,
+                g.quats,
+                g.opacity_logits,
+                g.sh,
+                b.grad2d.all(),
+                b.d_means.all(),
+                b.d_scales.all(),
+                b.d_quats.all(),
+                b.d_opacity_logits.all(),
+                b.d_sh.all(),
+            ],
+            grid(g.n),
+        );
+    }
+
+    /// Forward in its own submit, growing `b` and re-running when the intersection capacity
+    /// overflowed. For rendering outside the training step (tests, eval, render).
+    pub fn render_checked(
+        &self,
+        gpu: &Gpu,
+        b: &mut RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+        o: &RenderOpts,
+    ) -> Result<()> {
+        loop {
+            let mut rec = Recorder::new(gpu)?;
+            self.forward(&mut rec, b, cam, g, o);
+            rec.finish()?;
+            let need = b.intersections(gpu)?;
+            if need <= b.isect_capacity {
+                return Ok(());
+            }
+            let grown = need.checked_add(need / 4).ok_or(Error::Capacity {
+                what: "tile intersections",
+                capacity: u32::MAX as u64,
+                asked: need as u64,
+            })?;
+            *b = self.buffers(
+                gpu,
+                b.max_gaussians,
+                b.width,
+                b.height,
+                b.sh_coeffs,
+                b.feature_dims,
+                grown,
+            )?;
+        }
+    }
+}

@@ -1,0 +1,215 @@
+//! The GPU rasteriser against gsplat (CUDA, "classic" mode): an external oracle computed by the
+//! most used 3DGS implementation (../shared/data/gsplat-reference, conventions in its README).
+
+use std::path::PathBuf;
+
+use dispflow_vk::kernels::raster::{
+    Camera, OutputGrads, Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
+};
+use dispflow_vk::testing;
+use dispflow_vk::vk::Recorder;
+
+fn data_dir() -> Option<PathBuf> {
+    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/gsplat-reference");
+    d.is_dir().then_some(d)
+}
+
+struct Case {
+    t: std::collections::HashMap<String, Vec<f32>>,
+}
+
+impl Case {
+    fn load(name: &str) -> Option<Case> {
+        let Some(dir) = data_dir() else {
+            eprintln!("skipped: ../shared/data/gsplat-reference not found");
+            return None;
+        };
+        let bytes = std::fs::read(dir.join(name)).expect("read safetensors");
+        let st = safetensors::SafeTensors::deserialize(&bytes).expect("parse safetensors");
+        let t = st
+            .tensors()
+            .into_iter()
+            .map(|(k, v)| {
+                (
+                    k.to_string(),
+                    bytemuck::pod_collect_to_vec::<u8, f32>(v.data()),
+                )
+            })
+            .collect();
+        Some(Case { t })
+    }
+    fn get(&self, k: &str) -> &[f32] {
+        &self.t[k]
+    }
+}
+
+fn camera() -> Camera {
+    Camera {
+        rot: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        trans: [-0.123, -0.456, 8.0],
+        fx: 61.5,
+        fy: 61.5,
+        cx: 61.5,
+        cy: 41.0,
+        width: 123,
+        height: 82,
+        near: 0.01,
+    }
+}
+
+/// |got − want| <= abs + rel·|want| elementwise, with a message naming the worst element.
+fn assert_close(what: &str, got: &[f32], want: &[f32], abs: f32, rel: f32) {
+    assert_eq!(got.len(), want.len(), "{what}: length");
+    let mut worst = (0usize, 0.0f32);
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        let excess = (g - w).abs() - (abs + rel * w.abs());
+        assert!(g.is_finite(), "{what}[{i}] = {g} is not finite");
+        if excess > worst.1 {
+            worst = (i, excess);
+        }
+    }
+    let i = worst.0;
+    assert!(
+        worst.1 <= 0.0,
+        "{what}[{i}]: got {}, want {} (abs {abs}, rel {rel})",
+        got[i],
+        want[i]
+    );
+}
+
+fn run(name: &str) {
+    let Some(c) = Case::load(name) else { return };
+    let gpu = testing::gpu();
+    let rast = Rasterizer::new(&gpu).unwrap();
+    let n = c.get("opacities").len() as u32;
+    let scales: Vec<f32> = c.get("scales").iter().map(|s| s.exp()).collect();
+    let means = gpu.buffer_from("means", c.get("means")).unwrap();
+    let sc = gpu.buffer_from("scales", &scales).unwrap();
+    let quats = gpu.buffer_from("quats", c.get("quats")).unwrap();
+    let op = gpu.buffer_from("opacities", c.get("opacities")).unwrap();
+    let sh = gpu.buffer_from("sh", c.get("coeffs")).unwrap();
+    let cam = camera();
+    let g = SplatInputs {
+        n,
+        means: means.all(),
+        scales: sc.all(),
+        quats: quats.all(),
+        opacity_logits: op.all(),
+        sh: sh.all(),
+        sh_coeffs: 16,
+        sh_degree: 3,
+        features: None,
+    };
+    let opts = RenderOpts {
+        background: [0.0; 3],
+        alpha_max: 0.999,
+    };
+    // Start with a capacity too small on purpose: render_checked must grow and re-run.
+    let mut b = rast
+        .buffers(&gpu, n, cam.width, cam.height, 16, 0, 1)
+        .unwrap();
+    for buf in [&b.out_rgba, &b.splats, &b.grad2d, &b.d_means] {
+        testing::fill_noise(&gpu, buf, 7);
+    }
+    rast.render_checked(&gpu, &mut b, &cam, &g, &opts).unwrap();
+    assert!(b.isect_capacity() >= b.intersections(&gpu).unwrap());
+
+    let splats: Vec<f32> = gpu
+        .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
+        .unwrap();
+    let xys: Vec<f32> = (0..n as usize)
+        .flat_map(|i| [splats[12 * i], splats[12 * i + 1]])
+        .collect();
+    let depths: Vec<f32> = (0..n as usize).map(|i| splats[12 * i + 2]).collect();
+    let conics: Vec<f32> = (0..n as usize)
+        .flat_map(|i| [splats[12 * i + 4], splats[12 * i + 5], splats[12 * i + 6]])
+        .collect();
+    assert_close("xys", &xys, c.get("xys"), 1e-4, 1e-5);
+    assert_close("depths", &depths, c.get("depths"), 1e-5, 1e-6);
+    assert_close("conics", &conics, c.get("conics"), 1e-6, 1e-4);
+    let img: Vec<f32> = gpu.read(b.out_rgba.all()).unwrap();
+    assert_close("out_img", &img, c.get("out_img"), 2e-5, 1e-4);
+
+    let d_rgba = gpu.buffer_from("v_out_img", c.get("v_out_img")).unwrap();
+    let d_depth = gpu
+        .buffer_from(
+            "zero depth grad",
+            &vec![0f32; (cam.width * cam.height) as usize],
+        )
+        .unwrap();
+    let mut rec = Recorder::new(&gpu).unwrap();
+    rast.backward(
+        &mut rec,
+        &b,
+        &cam,
+        &g,
+        &opts,
+        &OutputGrads {
+            rgba: d_rgba.all(),
+            depth: d_depth.all(),
+            features: None,
+        },
+    );
+    rec.finish().unwrap();
+    let g2: Vec<f32> = gpu.read(b.grad2d.all()).unwrap();
+    let s = G2D_STRIDE as usize;
+    let v_xy: Vec<f32> = (0..n as usize)
+        .flat_map(|i| [g2[s * i], g2[s * i + 1]])
+        .collect();
+    let v_con: Vec<f32> = (0..n as usize)
+        .flat_map(|i| [g2[s * i + 2], g2[s * i + 3], g2[s * i + 4]])
+        .collect();
+    // Stored gradients carry ~4 significant digits (README): rel 2e-3, abs 1e-7.
+    let (abs, rel) = (1e-7, 2e-3);
+    assert_close("v_xy", &v_xy, c.get("v_xy"), abs, rel);
+    assert_close("v_conics", &v_con, c.get("v_conics"), abs, rel);
+    let rd = |buf: &dispflow_vk::vk::Buffer, len: usize| -> Vec<f32> {
+        gpu.read::<f32>(buf.all()).unwrap()[..len].to_vec()
+    };
+    let nn = n as usize;
+    assert_close(
+        "v_means",
+        &rd(&b.d_means, 3 * nn),
+        c.get("v_means"),
+        abs,
+        rel,
+    );
+    // gsplat differentiates log-scales: ∂L/∂log s = s · ∂L/∂s.
+    let v_log: Vec<f32> = rd(&b.d_scales, 3 * nn)
+        .iter()
+        .zip(&scales)
+        .map(|(g, s)| g * s)
+        .collect();
+    assert_close("v_scales", &v_log, c.get("v_scales"), abs, rel);
+    assert_close(
+        "v_quats",
+        &rd(&b.d_quats, 4 * nn),
+        c.get("v_quats"),
+        abs,
+        rel,
+    );
+    assert_close(
+        "v_opacities",
+        &rd(&b.d_opacity_logits, nn),
+        c.get("v_opacities"),
+        abs,
+        rel,
+    );
+    assert_close(
+        "v_coeffs",
+        &rd(&b.d_sh, 48 * nn),
+        c.get("v_coeffs"),
+        abs,
+        rel,
+    );
+}
+
+#[test]
+fn tiny_case_matches_gsplat() {
+    run("tiny_case.safetensors");
+}
+
+#[test]
+fn basic_case_matches_gsplat() {
+    run("basic_case.safetensors");
+}
