@@ -1,0 +1,271 @@
+//! Scene helpers shared by the rasteriser tests: host-side Gaussians, upload, run, read back.
+#![allow(dead_code)]
+
+use dispflow_vk::kernels::raster::{
+    Camera, OutputGrads, RasterBuffers, Rasterizer, RenderOpts, SplatInputs,
+};
+use dispflow_vk::testing::{self, Noise, TestGpu};
+use dispflow_vk::vk::{Buffer, Recorder};
+
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    pub means: Vec<[f32; 3]>,
+    pub scales: Vec<[f32; 3]>,
+    pub quats: Vec<[f32; 4]>,
+    pub logits: Vec<f32>,
+    pub sh: Vec<f32>,
+    pub sh_coeffs: u32,
+    pub sh_degree: u32,
+    pub features: Vec<f32>,
+    pub feature_dims: u32,
+}
+
+impl Scene {
+    pub fn len(&self) -> usize {
+        self.logits.len()
+    }
+    pub fn push(
+        &mut self,
+        mean: [f32; 3],
+        scale: [f32; 3],
+        quat: [f32; 4],
+        logit: f32,
+        rgb: [f32; 3],
+    ) {
+        self.means.push(mean);
+        self.scales.push(scale);
+        self.quats.push(quat);
+        self.logits.push(logit);
+        // DC term so that colour = rgb: c = C0·sh0 + 0.5.
+        let c0 = 0.282_094_8_f32;
+        for k in 0..self.sh_coeffs {
+            for ch in 0..3 {
+                self.sh
+                    .push(if k == 0 { (rgb[ch] - 0.5) / c0 } else { 0.0 });
+            }
+        }
+        for c in 0..self.feature_dims {
+            self.features
+                .push(0.1 * (c as f32 + 1.0) * (self.len() as f32).sin());
+        }
+    }
+}
+
+/// A camera at the origin looking down +z.
+pub fn camera(width: u32, height: u32) -> Camera {
+    let f = 0.8 * width.max(height) as f32;
+    Camera {
+        rot: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        trans: [0.0, 0.0, 0.0],
+        fx: f,
+        fy: f,
+        cx: 0.5 * width as f32 + 0.3,
+        cy: 0.5 * height as f32 - 0.2,
+        width,
+        height,
+        near: 0.01,
+    }
+}
+
+/// Random Gaussians in front of `cam`, a mix of sizes, orientations and opacities.
+pub fn random_scene(seed: u64, n: usize, sh_degree: u32, feature_dims: u32) -> Scene {
+    let mut r = Noise::new(seed);
+    let mut u = move || (r.next_u32() as f32 + 0.5) / 4_294_967_296.0;
+    let sh_coeffs = (sh_degree + 1).pow(2);
+    let mut s = Scene {
+        sh_coeffs,
+        sh_degree,
+        feature_dims,
+        ..Default::default()
+    };
+    for _ in 0..n {
+        let z = 2.0 + 4.0 * u();
+        s.means.push([(u() - 0.5) * z, (u() - 0.5) * z * 0.8, z]);
+        s.scales
+            .push([0.02 + 0.3 * u(), 0.02 + 0.3 * u(), 0.02 + 0.3 * u()]);
+        s.quats.push([u() - 0.5, u() - 0.5, u() - 0.5, u() - 0.5]);
+        s.logits.push(4.0 * u() - 2.0);
+        for _ in 0..sh_coeffs * 3 {
+            s.sh.push(0.6 * (u() - 0.5));
+        }
+        for _ in 0..feature_dims {
+            s.features.push(2.0 * u() - 1.0);
+        }
+    }
+    s
+}
+
+pub struct Uploaded {
+    pub means: Buffer,
+    pub scales: Buffer,
+    pub quats: Buffer,
+    pub logits: Buffer,
+    pub sh: Buffer,
+    pub features: Buffer,
+    pub n: u32,
+    pub sh_coeffs: u32,
+    pub sh_degree: u32,
+    pub feature_dims: u32,
+}
+
+impl Uploaded {
+    pub fn new(gpu: &TestGpu, s: &Scene) -> Uploaded {
+        let up = |name: &str, v: &[f32]| {
+            if v.is_empty() {
+                gpu.buffer(name, 16).unwrap()
+            } else {
+                gpu.buffer_from(name, v).unwrap()
+            }
+        };
+        Uploaded {
+            means: up("means", s.means.as_flattened()),
+            scales: up("scales", s.scales.as_flattened()),
+            quats: up("quats", s.quats.as_flattened()),
+            logits: up("logits", &s.logits),
+            sh: up("sh", &s.sh),
+            features: up("features", &s.features),
+            n: s.len() as u32,
+            sh_coeffs: s.sh_coeffs,
+            sh_degree: s.sh_degree,
+            feature_dims: s.feature_dims,
+        }
+    }
+    pub fn inputs(&self) -> SplatInputs<'_> {
+        SplatInputs {
+            n: self.n,
+            means: self.means.all(),
+            scales: self.scales.all(),
+            quats: self.quats.all(),
+            opacity_logits: self.logits.all(),
+            sh: self.sh.all(),
+            sh_coeffs: self.sh_coeffs,
+            sh_degree: self.sh_degree,
+            features: (self.feature_dims > 0).then(|| self.features.all()),
+        }
+    }
+}
+
+pub struct Rendered {
+    pub rgba: Vec<[f32; 4]>,
+    pub depth: Vec<f32>,
+    pub final_t: Vec<f32>,
+    pub n_contrib: Vec<u32>,
+    pub features: Vec<f32>,
+}
+
+/// Forward (growing capacity as needed) and read back.
+pub fn render(
+    gpu: &TestGpu,
+    rast: &Rasterizer,
+    cam: &Camera,
+    up: &Uploaded,
+    opts: &RenderOpts,
+) -> (RasterBuffers, Rendered) {
+    let mut b = rast
+        .buffers(
+            gpu,
+            up.n.max(1),
+            cam.width,
+            cam.height,
+            up.sh_coeffs,
+            up.feature_dims,
+            64,
+        )
+        .unwrap();
+    for buf in [
+        &b.out_rgba,
+        &b.out_depth,
+        &b.final_t,
+        &b.n_contrib,
+        &b.out_features,
+        &b.splats,
+    ] {
+        testing::fill_noise(gpu, buf, 3);
+    }
+    rast.render_checked(gpu, &mut b, cam, &up.inputs(), opts)
+        .unwrap();
+    let px = (cam.width * cam.height) as u64;
+    let out = Rendered {
+        rgba: gpu.read(b.out_rgba.elems::<[f32; 4]>(0, px)).unwrap(),
+        depth: gpu.read(b.out_depth.elems::<f32>(0, px)).unwrap(),
+        final_t: gpu.read(b.final_t.elems::<f32>(0, px)).unwrap(),
+        n_contrib: gpu.read(b.n_contrib.elems::<u32>(0, px)).unwrap(),
+        features: gpu
+            .read(b.out_features.elems::<f32>(0, px * up.feature_dims as u64))
+            .unwrap(),
+    };
+    (b, out)
+}
+
+pub struct Grads {
+    pub grad2d: Vec<f32>,
+    pub d_features: Vec<f32>,
+    pub d_means: Vec<f32>,
+    pub d_scales: Vec<f32>,
+    pub d_quats: Vec<f32>,
+    pub d_logits: Vec<f32>,
+    pub d_sh: Vec<f32>,
+}
+
+/// Backward with the given upstream gradients (rgba [px,4], depth [px], features [px,K]).
+pub fn backward(
+    gpu: &TestGpu,
+    rast: &Rasterizer,
+    b: &RasterBuffers,
+    cam: &Camera,
+    up: &Uploaded,
+    opts: &RenderOpts,
+    d_rgba: &[f32],
+    d_depth: &[f32],
+    d_feat: &[f32],
+) -> Grads {
+    let dr = gpu.buffer_from("d rgba", d_rgba).unwrap();
+    let dd = gpu.buffer_from("d depth", d_depth).unwrap();
+    let df = if d_feat.is_empty() {
+        gpu.buffer("d feat", 16).unwrap()
+    } else {
+        gpu.buffer_from("d feat", d_feat).unwrap()
+    };
+    for buf in [
+        &b.d_means,
+        &b.d_scales,
+        &b.d_quats,
+        &b.d_opacity_logits,
+        &b.d_sh,
+        &b.grad2d,
+        &b.d_features,
+    ] {
+        testing::fill_noise(gpu, buf, 4);
+    }
+    let mut rec = Recorder::new(gpu).unwrap();
+    let d = OutputGrads {
+        rgba: dr.all(),
+        depth: dd.all(),
+        features: (up.feature_dims > 0).then(|| df.all()),
+    };
+    rast.backward(&mut rec, b, cam, &up.inputs(), opts, &d);
+    rec.finish().unwrap();
+    let n = up.n as u64;
+    let rd =
+        |buf: &Buffer, per: u64| -> Vec<f32> { gpu.read(buf.elems::<f32>(0, n * per)).unwrap() };
+    Grads {
+        grad2d: rd(&b.grad2d, 12),
+        d_features: rd(&b.d_features, up.feature_dims as u64),
+        d_means: rd(&b.d_means, 3),
+        d_scales: rd(&b.d_scales, 3),
+        d_quats: rd(&b.d_quats, 4),
+        d_logits: rd(&b.d_opacity_logits, 1),
+        d_sh: rd(&b.d_sh, up.sh_coeffs as u64 * 3),
+    }
+}
+
+/// Deterministic upstream gradients for `px` pixels.
+pub fn upstream(seed: u64, px: usize, k: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let mut r = Noise::new(seed);
+    let mut u = move || (r.next_u32() as f32 / 4_294_967_296.0) - 0.5;
+    (
+        (0..4 * px).map(|_| u()).collect(),
+        (0..px).map(|_| 0.1 * u()).collect(),
+        (0..k * px).map(|_| u()).collect(),
+    )
+}
