@@ -4,6 +4,9 @@
 
 use crate::error::{Error, Result};
 use crate::kernels::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
+use crate::kernels::raster::{
+    Camera, OutputGrads, RasterBuffers, Rasterizer, RenderOpts, SplatInputs,
+};
 use crate::kernels::scan::{Count, PrefixSum, ScanScratch};
 use crate::reference;
 use crate::testing::Noise;
@@ -177,6 +180,123 @@ impl ScanCase {
     }
 }
 
+/// One rasteriser benchmark: `n` random Gaussians (SH degree 3) seen by a `res`×`res` camera,
+/// sized so the covered area per Gaussian shrinks as `n` grows (like a real capture).
+pub struct RasterCase {
+    rast: Rasterizer,
+    bufs: RasterBuffers,
+    cam: Camera,
+    inputs: [Buffer; 5],
+    d_rgba: Buffer,
+    d_depth: Buffer,
+    pub n: u32,
+    pub res: u32,
+}
+
+impl RasterCase {
+    pub fn new(gpu: &Gpu, n: u32, res: u32) -> Result<Self> {
+        let rast = Rasterizer::new(gpu)?;
+        let mut r = Noise::new(n as u64 ^ res as u64);
+        let mut u = move || (r.next_u32() as f32 + 0.5) / 4_294_967_296.0;
+        let s = 0.6 / (n as f32).cbrt();
+        let mut means = Vec::with_capacity(3 * n as usize);
+        let mut scales = Vec::with_capacity(3 * n as usize);
+        let mut quats = Vec::with_capacity(4 * n as usize);
+        let mut logits = Vec::with_capacity(n as usize);
+        let mut sh = Vec::with_capacity(48 * n as usize);
+        for _ in 0..n {
+            let z = 2.0 + 4.0 * u();
+            means.extend([(u() - 0.5) * z, (u() - 0.5) * z, z]);
+            scales.extend([s * (0.3 + u()), s * (0.3 + u()), s * (0.3 + u())]);
+            quats.extend([u() - 0.5, u() - 0.5, u() - 0.5, u() - 0.5]);
+            logits.push(2.0 * u() - 1.0);
+            sh.extend((0..48).map(|_| 0.3 * (u() - 0.5)));
+        }
+        let cam = Camera {
+            rot: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            trans: [0.0; 3],
+            fx: res as f32,
+            fy: res as f32,
+            cx: 0.5 * res as f32,
+            cy: 0.5 * res as f32,
+            width: res,
+            height: res,
+            near: 0.01,
+        };
+        let inputs = [
+            gpu.buffer_from("bench means", &means)?,
+            gpu.buffer_from("bench scales", &scales)?,
+            gpu.buffer_from("bench quats", &quats)?,
+            gpu.buffer_from("bench logits", &logits)?,
+            gpu.buffer_from("bench sh", &sh)?,
+        ];
+        let px = (res * res) as usize;
+        let d_rgba = gpu.buffer_from(
+            "bench d rgba",
+            &(0..4 * px)
+                .map(|i| ((i % 7) as f32 - 3.0) * 1e-3)
+                .collect::<Vec<_>>(),
+        )?;
+        let d_depth = gpu.buffer_from("bench d depth", &vec![0f32; px])?;
+        let mut bufs = rast.buffers(gpu, n, res, res, 16, 0, 4 * n)?;
+        rast.render_checked(
+            gpu,
+            &mut bufs,
+            &cam,
+            &splat_inputs(&inputs, n),
+            &RenderOpts::default(),
+        )?;
+        Ok(RasterCase {
+            rast,
+            bufs,
+            cam,
+            inputs,
+            d_rgba,
+            d_depth,
+            n,
+            res,
+        })
+    }
+
+    /// Forward, and backward when `with_backward`; timings labelled `fwd/…` and `bwd/…`.
+    pub fn run(&self, gpu: &Gpu, with_backward: bool) -> Result<Timings> {
+        let g = splat_inputs(&self.inputs, self.n);
+        let o = RenderOpts::default();
+        let mut rec = Recorder::timed(gpu)?;
+        rec.set_zone("fwd");
+        self.rast.forward(&mut rec, &self.bufs, &self.cam, &g, &o);
+        if with_backward {
+            rec.set_zone("bwd");
+            let d = OutputGrads {
+                rgba: self.d_rgba.all(),
+                depth: self.d_depth.all(),
+                features: None,
+            };
+            self.rast
+                .backward(&mut rec, &self.bufs, &self.cam, &g, &o, &d);
+        }
+        rec.finish()
+    }
+
+    pub fn intersections(&self, gpu: &Gpu) -> Result<u32> {
+        self.bufs.intersections(gpu)
+    }
+}
+
+fn splat_inputs(inputs: &[Buffer; 5], n: u32) -> SplatInputs<'_> {
+    SplatInputs {
+        n,
+        means: inputs[0].all(),
+        scales: inputs[1].all(),
+        quats: inputs[2].all(),
+        opacity_logits: inputs[3].all(),
+        sh: inputs[4].all(),
+        sh_coeffs: 16,
+        sh_degree: 3,
+        features: None,
+    }
+}
+
 /// Median of a sample (NaN-free).
 pub fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
@@ -191,9 +311,25 @@ pub fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
+/// Kernel families `dispflow-vk bench` can time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Suite {
+    Sort,
+    Scan,
+    Raster,
+}
+
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
-    /// Problem sizes as powers of two (comma-separated).
+    /// Kernel families to time (comma-separated).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "sort,scan,raster"
+    )]
+    pub suite: Vec<Suite>,
+    /// Sort/scan sizes as powers of two (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "16,18,20,22")]
     pub log2_sizes: Vec<u32>,
     /// Timed repetitions per case; the table reports the median.
@@ -207,6 +343,12 @@ pub struct BenchArgs {
         default_value = "random32,tile-depth64"
     )]
     pub shapes: Vec<KeyShape>,
+    /// Rasteriser: Gaussian counts (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "1000,10000,100000")]
+    pub gaussians: Vec<u32>,
+    /// Rasteriser: square image sizes in pixels (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "128,256")]
+    pub resolutions: Vec<u32>,
     /// Also write the rows as JSON to this file.
     #[arg(long)]
     pub json: Option<std::path::PathBuf>,
@@ -265,30 +407,56 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
         gpu.info, gpu.info.subgroup_size
     );
     let mut rows = Vec::new();
+    let has = |x: Suite| args.suite.contains(&x);
     for &lg in &args.log2_sizes {
         let n = 1u32 << lg.min(26);
-        for &shape in &args.shapes {
-            let case = SortCase::new(&gpu, n, shape)?;
+        if has(Suite::Sort) {
+            for &shape in &args.shapes {
+                let case = SortCase::new(&gpu, n, shape)?;
+                case.verify(&gpu)?;
+                let (med, stages) = measure(args.reps, || case.run(&gpu).map(|r| r.0))?;
+                rows.push(BenchRow {
+                    kernel: format!("sort {shape:?} ({} passes)", passes(shape.bits())),
+                    n,
+                    median_ms: med,
+                    m_per_s: n as f64 / med / 1e3,
+                    stages: merge_stages(stages),
+                });
+            }
+        }
+        if has(Suite::Scan) {
+            let case = ScanCase::new(&gpu, n)?;
             case.verify(&gpu)?;
-            let (med, stages) = measure(args.reps, || case.run(&gpu).map(|r| r.0))?;
+            let (med, stages) = measure(args.reps, || case.run(&gpu))?;
             rows.push(BenchRow {
-                kernel: format!("sort {shape:?} ({} passes)", passes(shape.bits())),
+                kernel: "exclusive scan u32".into(),
                 n,
                 median_ms: med,
                 m_per_s: n as f64 / med / 1e3,
-                stages: merge_stages(stages),
+                stages,
             });
         }
-        let case = ScanCase::new(&gpu, n)?;
-        case.verify(&gpu)?;
-        let (med, stages) = measure(args.reps, || case.run(&gpu))?;
-        rows.push(BenchRow {
-            kernel: "exclusive scan u32".into(),
-            n,
-            median_ms: med,
-            m_per_s: n as f64 / med / 1e3,
-            stages,
-        });
+    }
+    if has(Suite::Raster) {
+        for &res in &args.resolutions {
+            for &n in &args.gaussians {
+                let case = RasterCase::new(&gpu, n, res)?;
+                let isect = case.intersections(&gpu)?;
+                for bwd in [false, true] {
+                    let (med, stages) = measure(args.reps, || case.run(&gpu, bwd))?;
+                    rows.push(BenchRow {
+                        kernel: format!(
+                            "raster {} {res}² ({isect} tile hits)",
+                            if bwd { "fwd+bwd" } else { "fwd" }
+                        ),
+                        n,
+                        median_ms: med,
+                        m_per_s: n as f64 / med / 1e3,
+                        stages: merge_stages(stages),
+                    });
+                }
+            }
+        }
     }
     println!("\n| kernel | n | median GPU ms | M elements/s | time share by stage |");
     println!("|---|---:|---:|---:|---|");
@@ -299,9 +467,9 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
             .map(|(l, p)| format!("{l} {p:.0}%"))
             .collect();
         println!(
-            "| {} | 2^{} | {:.3} | {:.1} | {} |",
+            "| {} | {} | {:.3} | {:.2} | {} |",
             r.kernel,
-            r.n.trailing_zeros(),
+            r.n,
             r.median_ms,
             r.m_per_s,
             st.join(", ")
@@ -317,14 +485,24 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
     Ok(rows)
 }
 
-/// Folds the many per-pass sort dispatches into their stage names (hist, scan, scatter).
+/// Folds the many per-pass dispatches into stage names (scan levels into `scan`, sort passes
+/// into `radix_hist`/`radix_scatter`, feature variants into their stage), keeping the zone.
 fn merge_stages(stages: Vec<(String, f64)>) -> Vec<(String, f64)> {
     let mut out: Vec<(String, f64)> = Vec::new();
     for (l, p) in stages {
-        let key = if l.starts_with("scan_") {
-            "scan".to_string()
+        let (zone, name) = l.rsplit_once('/').unwrap_or(("", l.as_str()));
+        let name = if name.starts_with("scan_") {
+            "scan"
         } else {
-            l.replace("_u32", "").replace("_u64", "")
+            name
+        };
+        let name = ["_u32", "_u64", "_f0", "_f2", "_f3"]
+            .iter()
+            .fold(name.to_string(), |n, s| n.replace(s, ""));
+        let key = if zone.is_empty() {
+            name
+        } else {
+            format!("{zone}/{name}")
         };
         match out.iter_mut().find(|e| e.0 == key) {
             Some(e) => e.1 += p,
