@@ -21,16 +21,26 @@ fn benches(c: &mut Criterion) {
         counts.push(1_000_000);
         resolutions.push(1024);
     }
-    let cases: Vec<(u32, u32)> = counts.iter().map(|&n| (n, 256)).chain(resolutions.iter().map(|&r| (10_000, r))).collect();
+    let cases: Vec<(u32, u32)> = counts
+        .iter()
+        .map(|&n| (n, 256))
+        .chain(resolutions.iter().map(|&r| (10_000, r)))
+        .collect();
     for (name, bwd) in [("raster_forward", false), ("raster_forward_backward", true)] {
         let mut g = c.benchmark_group(name);
-        g.sample_size(10).warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_secs(3));
+        g.sample_size(10)
+            .warm_up_time(Duration::from_millis(300))
+            .measurement_time(Duration::from_secs(3));
         for &(n, res) in &cases {
             let case = RasterCase::new(&gpu, n, res).expect("raster case");
             g.throughput(Throughput::Elements(n as u64));
             g.bench_with_input(BenchmarkId::new(format!("{res}px"), n), &n, |b, _| {
                 b.iter_custom(|iters| {
-                    (0..iters).map(|_| Duration::from_secs_f64(case.run(&gpu, bwd).unwrap().total_ms() * 1e-3)).sum()
+                    (0..iters)
+                        .map(|_| {
+                            Duration::from_secs_f64(case.run(&gpu, bwd).unwrap().total_ms() * 1e-3)
+                        })
+                        .sum()
                 })
             });
         }

@@ -5,7 +5,7 @@
 use crate::error::{Error, Result};
 use crate::kernels::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use crate::kernels::raster::{
-    Camera, OutputGrads, RasterBuffers, Rasterizer, RenderOpts, SplatInputs,
+    Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
 };
 use crate::kernels::scan::{Count, PrefixSum, ScanScratch};
 use crate::reference;
@@ -238,7 +238,15 @@ impl RasterCase {
                 .collect::<Vec<_>>(),
         )?;
         let d_depth = gpu.buffer_from("bench d depth", &vec![0f32; px])?;
-        let mut bufs = rast.buffers(gpu, n, res, res, 16, 0, 4 * n)?;
+        let size = RasterSize {
+            max_gaussians: n,
+            width: res,
+            height: res,
+            sh_coeffs: 16,
+            feature_dims: 0,
+            isect_capacity: 4 * n,
+        };
+        let mut bufs = rast.buffers(gpu, &size)?;
         rast.render_checked(
             gpu,
             &mut bufs,

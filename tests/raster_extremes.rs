@@ -27,8 +27,15 @@ fn run_finite(scene: &Scene, w: u32, h: u32) -> (Rendered, Grads) {
     };
     let (b, out) = render(&gpu, &rast, &cam, &up, &opts);
     let px = (w * h) as usize;
-    let (dr, dd, df) = upstream(9, px, scene.feature_dims as usize);
-    let g = backward(&gpu, &rast, &b, &cam, &up, &opts, &dr, &dd, &df);
+    let g = backward(
+        &gpu,
+        &rast,
+        &b,
+        &cam,
+        &up,
+        &opts,
+        &upstream(9, px, scene.feature_dims as usize),
+    );
     all_finite("rgba", out.rgba.as_flattened());
     all_finite("depth", &out.depth);
     all_finite("features", &out.features);
@@ -46,7 +53,10 @@ fn run_finite(scene: &Scene, w: u32, h: u32) -> (Rendered, Grads) {
     (out, g)
 }
 
-fn scene_with(items: &[([f32; 3], [f32; 3], [f32; 4], f32)]) -> Scene {
+/// (mean, scale, quaternion, opacity logit) of one Gaussian.
+type Item = ([f32; 3], [f32; 3], [f32; 4], f32);
+
+fn scene_with(items: &[Item]) -> Scene {
     let mut s = Scene {
         sh_coeffs: 4,
         sh_degree: 1,

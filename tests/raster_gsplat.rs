@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use dispflow_vk::kernels::raster::{
-    Camera, OutputGrads, Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
+    Camera, OutputGrads, RasterSize, Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
 };
 use dispflow_vk::testing;
 use dispflow_vk::vk::Recorder;
@@ -105,9 +105,15 @@ fn run(name: &str) {
         alpha_max: 0.999,
     };
     // Start with a capacity too small on purpose: render_checked must grow and re-run.
-    let mut b = rast
-        .buffers(&gpu, n, cam.width, cam.height, 16, 0, 1)
-        .unwrap();
+    let size = RasterSize {
+        max_gaussians: n,
+        width: cam.width,
+        height: cam.height,
+        sh_coeffs: 16,
+        feature_dims: 0,
+        isect_capacity: 1,
+    };
+    let mut b = rast.buffers(&gpu, &size).unwrap();
     for buf in [&b.out_rgba, &b.splats, &b.grad2d, &b.d_means] {
         testing::fill_noise(&gpu, buf, 7);
     }

@@ -124,6 +124,20 @@ pub struct OutputGrads<'a> {
     pub features: Option<BufSlice<'a>>,
 }
 
+/// What `RasterBuffers` are sized for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RasterSize {
+    pub max_gaussians: u32,
+    pub width: u32,
+    pub height: u32,
+    /// SH coefficients stored per Gaussian: 1, 4, 9 or 16.
+    pub sh_coeffs: u32,
+    /// Extra blended channels: one of `FEATURE_DIMS`.
+    pub feature_dims: u32,
+    /// Tile intersections (first guess; grown on overflow).
+    pub isect_capacity: u32,
+}
+
 /// Every buffer the rasteriser needs for `max_gaussians` splats at one image size, allocated
 /// once. Outputs (`out_*`) and gradients (`d_*`) are public for the caller to read or chain.
 pub struct RasterBuffers {
@@ -163,6 +177,17 @@ pub struct RasterBuffers {
 impl RasterBuffers {
     pub fn isect_capacity(&self) -> u32 {
         self.isect_capacity
+    }
+
+    pub fn size(&self) -> RasterSize {
+        RasterSize {
+            max_gaussians: self.max_gaussians,
+            width: self.width,
+            height: self.height,
+            sh_coeffs: self.sh_coeffs,
+            feature_dims: self.feature_dims,
+            isect_capacity: self.isect_capacity,
+        }
     }
 
     /// Tile intersections the last forward pass needed (read after its submit). Larger than
@@ -234,18 +259,17 @@ impl Rasterizer {
         })
     }
 
-    /// Buffers for up to `max_gaussians` splats on a `width`×`height` image with
-    /// `isect_capacity` tile intersections (grown by `render_checked` when exceeded).
-    pub fn buffers(
-        &self,
-        gpu: &Gpu,
-        max_gaussians: u32,
-        width: u32,
-        height: u32,
-        sh_coeffs: u32,
-        feature_dims: u32,
-        isect_capacity: u32,
-    ) -> Result<RasterBuffers> {
+    /// Buffers for `s.max_gaussians` splats on a `s.width`×`s.height` image (grown by
+    /// `render_checked` when the intersection capacity is exceeded).
+    pub fn buffers(&self, gpu: &Gpu, s: &RasterSize) -> Result<RasterBuffers> {
+        let RasterSize {
+            max_gaussians,
+            width,
+            height,
+            sh_coeffs,
+            feature_dims,
+            isect_capacity,
+        } = *s;
         variant(feature_dims)?;
         if !matches!(sh_coeffs, 1 | 4 | 9 | 16) {
             return Err(Error::Invalid(format!(
@@ -527,12 +551,10 @@ impl Rasterizer {
             })?;
             *b = self.buffers(
                 gpu,
-                b.max_gaussians,
-                b.width,
-                b.height,
-                b.sh_coeffs,
-                b.feature_dims,
-                grown,
+                &RasterSize {
+                    isect_capacity: grown,
+                    ..b.size()
+                },
             )?;
         }
     }

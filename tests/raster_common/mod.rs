@@ -2,7 +2,7 @@
 #![allow(dead_code)]
 
 use dispflow_vk::kernels::raster::{
-    Camera, OutputGrads, RasterBuffers, Rasterizer, RenderOpts, SplatInputs,
+    Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
 };
 use dispflow_vk::testing::{self, Noise, TestGpu};
 use dispflow_vk::vk::{Buffer, Recorder};
@@ -39,9 +39,8 @@ impl Scene {
         // DC term so that colour = rgb: c = C0·sh0 + 0.5.
         let c0 = 0.282_094_8_f32;
         for k in 0..self.sh_coeffs {
-            for ch in 0..3 {
-                self.sh
-                    .push(if k == 0 { (rgb[ch] - 0.5) / c0 } else { 0.0 });
+            for c in rgb {
+                self.sh.push(if k == 0 { (c - 0.5) / c0 } else { 0.0 });
             }
         }
         for c in 0..self.feature_dims {
@@ -161,17 +160,15 @@ pub fn render(
     up: &Uploaded,
     opts: &RenderOpts,
 ) -> (RasterBuffers, Rendered) {
-    let mut b = rast
-        .buffers(
-            gpu,
-            up.n.max(1),
-            cam.width,
-            cam.height,
-            up.sh_coeffs,
-            up.feature_dims,
-            64,
-        )
-        .unwrap();
+    let size = RasterSize {
+        max_gaussians: up.n.max(1),
+        width: cam.width,
+        height: cam.height,
+        sh_coeffs: up.sh_coeffs,
+        feature_dims: up.feature_dims,
+        isect_capacity: 64,
+    };
+    let mut b = rast.buffers(gpu, &size).unwrap();
     for buf in [
         &b.out_rgba,
         &b.out_depth,
@@ -207,7 +204,14 @@ pub struct Grads {
     pub d_sh: Vec<f32>,
 }
 
-/// Backward with the given upstream gradients (rgba [px,4], depth [px], features [px,K]).
+/// Upstream gradients: rgba [px,4], depth [px], features [px,K].
+pub struct Upstream {
+    pub rgba: Vec<f32>,
+    pub depth: Vec<f32>,
+    pub features: Vec<f32>,
+}
+
+/// Backward of the last forward in `b` with the given upstream gradients.
 pub fn backward(
     gpu: &TestGpu,
     rast: &Rasterizer,
@@ -215,10 +219,9 @@ pub fn backward(
     cam: &Camera,
     up: &Uploaded,
     opts: &RenderOpts,
-    d_rgba: &[f32],
-    d_depth: &[f32],
-    d_feat: &[f32],
+    u: &Upstream,
 ) -> Grads {
+    let (d_rgba, d_depth, d_feat) = (&u.rgba, &u.depth, &u.features);
     let dr = gpu.buffer_from("d rgba", d_rgba).unwrap();
     let dd = gpu.buffer_from("d depth", d_depth).unwrap();
     let df = if d_feat.is_empty() {
@@ -259,13 +262,13 @@ pub fn backward(
     }
 }
 
-/// Deterministic upstream gradients for `px` pixels.
-pub fn upstream(seed: u64, px: usize, k: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+/// Deterministic upstream gradients for `px` pixels and `k` feature channels.
+pub fn upstream(seed: u64, px: usize, k: usize) -> Upstream {
     let mut r = Noise::new(seed);
     let mut u = move || (r.next_u32() as f32 / 4_294_967_296.0) - 0.5;
-    (
-        (0..4 * px).map(|_| u()).collect(),
-        (0..px).map(|_| 0.1 * u()).collect(),
-        (0..k * px).map(|_| u()).collect(),
-    )
+    Upstream {
+        rgba: (0..4 * px).map(|_| u()).collect(),
+        depth: (0..px).map(|_| 0.1 * u()).collect(),
+        features: (0..k * px).map(|_| u()).collect(),
+    }
 }
