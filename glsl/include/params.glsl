@@ -50,3 +50,15 @@ struct BlendParams {
     uint pad0;
     uint pad1;
 };
+
+// src/kernels/loss.rs — photometric loss 0.8·L1 + 0.2·(1 − SSIM) and its gradient.
+struct LossParams {
+    uint width;
+    uint height;
+    uint planes;        // planes the blur passes work on
+    uint pad0;
+    float lambda_ssim;  // weight of (1 − SSIM); L1 gets 1 − lambda_ssim
+    float inv_count;    // 1 / (3 · width · height)
+    uint pad1;
+    uint pad2;
+};
