@@ -343,3 +343,335 @@ fn gsplat_tiny_case() {
 fn gsplat_basic_case() {
     gsplat_case("basic_case");
 }
+
+// ---------------------------------------------------------------------------------------------
+// 2. Finite differences of the whole f64 pipeline
+
+fn rot_from_angles(a: [f64; 3]) -> [[f64; 3]; 3] {
+    let (sx, cx) = a[0].sin_cos();
+    let (sy, cy) = a[1].sin_cos();
+    let (sz, cz) = a[2].sin_cos();
+    let rx = [[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]];
+    let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
+    let rz = [[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]];
+    let mul = |a: [[f64; 3]; 3], b: [[f64; 3]; 3]| {
+        let mut c = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                for k in 0..3 {
+                    c[i][j] += a[i][k] * b[k][j];
+                }
+            }
+        }
+        c
+    };
+    mul(mul(rz, ry), rx)
+}
+
+/// A random scene seen by a rotated, off-centre camera. Gaussian 0 lies beyond the Jacobian's
+/// x clamp, Gaussian 1 beyond its y clamp (both large enough to reach into the image), and
+/// Gaussian 2 has its red channel clamped at 0 by `max(SH + 0.5, 0)`.
+fn random_scene(seed: u64, w: u32, h: u32, n: usize, k: u32, sh_coeffs: u32, deg: u32) -> Scene {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let rot = rot_from_angles([0.2, -0.15, 0.1].map(|a| a * rng.gen_range(-1.0..1.0)));
+    let centre = [0.3, -0.2, -4.0];
+    let mut trans = [0.0f32; 3];
+    for i in 0..3 {
+        trans[i] = -(0..3).map(|j| rot[i][j] * centre[j]).sum::<f64>() as f32;
+    }
+    let rot32 = rot.map(|r| r.map(|x| x as f32));
+    let (fx, fy) = (0.9 * w as f32, 0.95 * w as f32);
+    let cam = Camera {
+        rot: rot32,
+        trans,
+        fx,
+        fy,
+        cx: 0.45 * w as f32,
+        cy: 0.55 * h as f32,
+        width: w,
+        height: h,
+        near: 0.01,
+    };
+    let lim_x_pos = (w as f32 - cam.cx) / fx + 0.3 * 0.5 * w as f32 / fx;
+    let lim_y_neg = cam.cy / fy + 0.3 * 0.5 * h as f32 / fy;
+    let mut s = Scene::empty(cam, sh_coeffs, deg);
+    s.params = BlendParams {
+        width: w,
+        height: h,
+        alpha_max: 0.99,
+        background: [0.1, 0.2, 0.3],
+        feature_dims: k,
+    };
+    let world = |pc: [f64; 3]| -> [f32; 3] {
+        // mean = rotᵀ (p_cam − trans)
+        std::array::from_fn(|j| {
+            (0..3)
+                .map(|i| rot32[i][j] as f64 * (pc[i] - trans[i] as f64))
+                .sum::<f64>() as f32
+        })
+    };
+    // Gaussians 3, 4, 5 are stacked on one line of sight: 3 and 5 nearly opaque (α clamped to
+    // alpha_max near their centres), so pixels there stop at 5 (T < 1e-4).
+    let stack = (0.1 * w as f64 / fx as f64, -0.05 * h as f64 / fy as f64);
+    for i in 0..n {
+        let mut z: f64 = rng.gen_range(2.5..5.0);
+        let (xz, yz, scale) = match i {
+            0 => (1.25 * lim_x_pos as f64, 0.0, 0.9),
+            1 => (0.0, -1.2 * lim_y_neg as f64, 0.9),
+            3..=5 => {
+                z = 2.0 + 0.4 * i as f64;
+                (stack.0, stack.1, 0.5)
+            }
+            _ => (
+                rng.gen_range(-0.45..0.45) * w as f64 / fx as f64,
+                rng.gen_range(-0.45..0.45) * h as f64 / fy as f64,
+                rng.gen_range(0.06..0.3),
+            ),
+        };
+        s.means.push(world([xz * z, yz * z, z]));
+        s.scales
+            .push(std::array::from_fn(|_| (scale * rng.gen_range(0.5..1.5)) as f32));
+        let q: [f32; 4] = loop {
+            let q = std::array::from_fn(|_| rng.gen_range(-1.0f32..1.0));
+            if q.iter().map(|v| v * v).sum::<f32>() > 0.1 {
+                break q;
+            }
+        };
+        s.quats.push(q);
+        s.logits.push(match i {
+            3 | 5 => 9.0,
+            4 => 1.5,
+            _ => rng.gen_range(-1.5..2.0),
+        });
+        for kk in 0..sh_coeffs {
+            for c in 0..3 {
+                let v = if kk == 0 {
+                    if i == 2 && c == 0 {
+                        -3.0
+                    } else {
+                        rng.gen_range(-0.6..0.6)
+                    }
+                } else {
+                    rng.gen_range(-0.25..0.25)
+                };
+                s.sh.push(v);
+            }
+        }
+        for _ in 0..k {
+            s.features.push(rng.gen_range(-1.0..1.0));
+        }
+    }
+    s
+}
+
+/// L = Σ_p u_rgb·rgb + u_a·alpha + u_d·depth + u_f·features on the unrounded pipeline, and the
+/// signature of every discrete decision taken on the way. With `colors`, the projected colours
+/// are replaced by those given: the view direction is detached by definition, so finite
+/// differences wrt the means hold the colours (a function of the means only through that
+/// direction) at their unperturbed values.
+fn fd_loss(
+    s: &Scene,
+    g: &Gaussians64,
+    feats: &[f64],
+    up: &Upstream,
+    colors: Option<&[[f64; 3]]>,
+) -> (f64, (u64, u64)) {
+    let mut proj = project_f64(&s.cam, g);
+    if let Some(c) = colors {
+        for (i, dst) in proj.color.iter_mut().enumerate() {
+            if proj.radius[i] > 0 {
+                *dst = c[i];
+            }
+        }
+    }
+    let out = blend_fwd_f64(&s.params, &proj, feats);
+    let mut l = 0.0;
+    for p in 0..out.rgb.len() {
+        for c in 0..3 {
+            l += up.rgb[p][c] as f64 * out.rgb[p][c];
+        }
+        l += up.alpha[p] as f64 * out.alpha[p] + up.depth[p] as f64 * out.depth[p];
+    }
+    for (u, f) in up.features.iter().zip(&out.features) {
+        l += *u as f64 * f;
+    }
+    (l, (proj.signature, out.signature))
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    Means,
+    Scales,
+    Quats,
+    Logits,
+    Sh,
+    Features,
+}
+
+fn param<'a>(g: &'a mut Gaussians64, f: &'a mut [f64], kind: Kind, j: usize) -> &'a mut f64 {
+    match kind {
+        Kind::Means => &mut g.means[j / 3][j % 3],
+        Kind::Scales => &mut g.scales[j / 3][j % 3],
+        Kind::Quats => &mut g.quats[j / 4][j % 4],
+        Kind::Logits => &mut g.opacity_logits[j],
+        Kind::Sh => &mut g.sh[j],
+        Kind::Features => &mut f[j],
+    }
+}
+
+/// Analytic gradients (blend_bwd_f64 ∘ project_bwd_f64) vs central differences (h = 1e-6) for
+/// every scalar parameter. A parameter whose ±h evaluation changes any discrete decision
+/// (culling, tile rect, Jacobian or colour clamp, α < 1/255 skip, α clamp, T stop) straddles a
+/// threshold, where FD is meaningless: it is skipped and counted, and at most 2% may be.
+fn check_fd(s: &Scene, up_seed: u64) {
+    let mut rng = Pcg64::seed_from_u64(up_seed);
+    let k = s.params.feature_dims as usize;
+    let up = Upstream::random(&mut rng, s.npix(), k);
+    let g = Gaussians64::from_f32(&s.g());
+    let feats: Vec<f64> = s.features.iter().map(|&x| x as f64).collect();
+
+    let proj = project_f64(&s.cam, &g);
+    let visible = proj.radius.iter().filter(|&&r| r > 0).count();
+    assert!(visible + 1 >= g.len(), "scene: {visible} of {} visible", g.len());
+    let bg = blend_bwd_f64(
+        &s.params,
+        &proj,
+        &feats,
+        &up.rgb,
+        &up.alpha,
+        &up.depth,
+        &up.features,
+    );
+    let pg = project_bwd_f64(&s.cam, &g, &bg);
+    // The clamped cases must really be exercised: Gaussians 0 and 1 (beyond the Jacobian clamp)
+    // contribute, Gaussian 2's red SH coefficients get exactly zero gradient.
+    for i in [0, 1] {
+        assert!(
+            pg.means[i].iter().any(|v| v.abs() > 1e-6),
+            "Gaussian {i} does not contribute"
+        );
+    }
+    let nc = s.sh_coeffs as usize;
+    for kk in 0..nc {
+        assert_eq!(pg.sh[(2 * nc + kk) * 3], 0.0, "clamped red channel has a gradient");
+    }
+
+    // The α clamp must be engaged somewhere (α of Gaussian 3 at some pixel centre).
+    let n_clamped = (0..s.npix())
+        .filter(|&pix| {
+            let (px, py) = (pix as u32 % s.params.width, pix as u32 / s.params.width);
+            let [a, b, c] = proj.conic[3];
+            let dx = proj.mean2d[3][0] - (px as f64 + 0.5);
+            let dy = proj.mean2d[3][1] - (py as f64 + 0.5);
+            let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+            proj.opacity[3] * (-sigma).exp() > s.params.alpha_max as f64
+        })
+        .count();
+    assert!(n_clamped > 0, "alpha_max clamp not exercised");
+
+    let (l0, sig0) = fd_loss(s, &g, &feats, &up, None);
+    let h = 1e-6;
+    let kinds: [(Kind, Vec<f64>); 6] = [
+        (Kind::Means, pg.means.iter().flatten().copied().collect()),
+        (Kind::Scales, pg.scales.iter().flatten().copied().collect()),
+        (Kind::Quats, pg.quats.iter().flatten().copied().collect()),
+        (Kind::Logits, pg.opacity_logits.clone()),
+        (Kind::Sh, pg.sh.clone()),
+        (Kind::Features, bg.features.clone()),
+    ];
+    let (mut total, mut skipped) = (0usize, 0usize);
+    for (kind, analytic) in kinds {
+        let scale = analytic.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let (mut fd, mut an) = (vec![], vec![]);
+        for (j, &a) in analytic.iter().enumerate() {
+            let eval = |delta: f64| {
+                let (mut g2, mut f2) = (g.clone(), feats.clone());
+                *param(&mut g2, &mut f2, kind, j) += delta;
+                let detach = (kind == Kind::Means).then_some(&proj.color[..]);
+                fd_loss(s, &g2, &f2, &up, detach)
+            };
+            let ((lp, sp), (lm, sm)) = (eval(h), eval(-h));
+            total += 1;
+            if sp != sig0 || sm != sig0 {
+                skipped += 1;
+                continue;
+            }
+            fd.push((lp - lm) / (2.0 * h));
+            an.push(a);
+        }
+        if analytic.is_empty() {
+            assert!(kind == Kind::Features && k == 0);
+            continue;
+        }
+        assert!(!an.is_empty(), "{kind:?}: nothing checked");
+        if kind != Kind::Features || k > 0 {
+            assert!(scale > 1e-3, "{kind:?}: gradient is vacuous (max {scale:e})");
+        }
+        // FD error: rounding ≈ 1e-16·|L|/h plus truncation O(h²); both ≪ 1e-6·(1 + |L|).
+        let abs = 1e-7 * (1.0 + l0.abs());
+        assert_close(&format!("FD {kind:?} seed {up_seed}"), &an, &fd, 1e-5, abs);
+    }
+    eprintln!("FD seed {up_seed}: {total} parameters, {skipped} skipped as straddling");
+    assert!(skipped * 50 <= total, "{skipped} of {total} parameters straddle a threshold");
+}
+
+#[test]
+fn fd_small_image_sh0_no_features() {
+    check_fd(&random_scene(1, 17, 13, 8, 0, 1, 0), 11);
+}
+
+#[test]
+fn fd_sh3_features() {
+    check_fd(&random_scene(2, 40, 32, 20, 3, 16, 3), 12);
+}
+
+#[test]
+fn fd_sh1_of_16_features_small() {
+    // Degree 1 active out of 16 stored coefficients: the unused ones get exactly zero gradient
+    // (and their FD is zero too).
+    let s = random_scene(3, 17, 13, 12, 3, 16, 1);
+    check_fd(&s, 13);
+    let up = Upstream::random(&mut Pcg64::seed_from_u64(5), s.npix(), 3);
+    let (_, _, _, pg) = s.grads(&up);
+    for i in 0..s.means.len() {
+        for kk in 4..16 {
+            for c in 0..3 {
+                assert_eq!(pg.sh[(i * 16 + kk) * 3 + c], 0.0);
+            }
+        }
+    }
+}
+
+#[test]
+fn f32_wrappers_match_f64_path() {
+    let s = random_scene(4, 40, 32, 20, 3, 16, 3);
+    let up = Upstream::random(&mut Pcg64::seed_from_u64(14), s.npix(), 3);
+    let (proj, out, bg, pg) = s.grads(&up);
+    let g = Gaussians64::from_f32(&s.g());
+    let feats: Vec<f64> = s.features.iter().map(|&x| x as f64).collect();
+    let proj64 = project_f64(&s.cam, &g);
+    let out64 = blend_fwd_f64(&s.params, &proj64, &feats);
+    let bg64 = blend_bwd_f64(
+        &s.params,
+        &proj64,
+        &feats,
+        &up.rgb,
+        &up.alpha,
+        &up.depth,
+        &up.features,
+    );
+    let pg64 = project_bwd_f64(&s.cam, &g, &bg64);
+    // Same discrete structure, values to the f32 rounding of the projected quantities.
+    assert_eq!(proj.radius, proj64.radius);
+    assert_eq!(proj.tile_rect, proj64.tile_rect);
+    assert_eq!(out.n_contrib, out64.n_contrib);
+    let rgb: Vec<f64> = out.rgb.iter().flatten().map(|&x| x as f64).collect();
+    let rgb64: Vec<f64> = out64.rgb.iter().flatten().copied().collect();
+    assert_close("rgb f32 vs f64", &rgb, &rgb64, 1e-6, 1e-6);
+    let flat = |v: &[[f64; 3]]| v.iter().flatten().copied().collect::<Vec<_>>();
+    let tol = |v: &[f64]| 1e-4 * v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let m64 = flat(&pg64.means);
+    assert_close("means f32 vs f64", &flat(&pg.means), &m64, 1e-3, tol(&m64));
+    assert_close("sh f32 vs f64", &pg.sh, &pg64.sh, 1e-3, tol(&pg64.sh));
+    assert_close("op f32 vs f64", &bg.opacity, &bg64.opacity, 1e-3, tol(&bg64.opacity));
+}
