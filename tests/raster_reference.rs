@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use dispflow_vk::reference::raster::{
     blend_bwd, blend_bwd_f64, blend_fwd, blend_fwd_f64, project, project_bwd, project_bwd_f64,
     project_f64, sigmoid, BlendGrads, BlendOut, BlendParams, Camera, Gaussians, Gaussians64,
-    ProjectGrads, Projected, TILE,
+    ProjectGrads, Projected,
 };
 use dispflow_vk::reference::sh;
 use rand::{Rng, SeedableRng};
@@ -144,10 +144,6 @@ fn identity_camera(width: u32, height: u32, f: f32) -> Camera {
 }
 
 const IDQ: [f32; 4] = [1.0, 0.0, 0.0, 0.0];
-
-fn finite<'a>(v: impl IntoIterator<Item = &'a f64>) -> bool {
-    v.into_iter().all(|x| x.is_finite())
-}
 
 /// Every forward output and gradient is finite.
 fn assert_all_finite(what: &str, out: &BlendOut, bg: &BlendGrads, pg: &ProjectGrads) {
@@ -674,4 +670,344 @@ fn f32_wrappers_match_f64_path() {
     assert_close("means f32 vs f64", &flat(&pg.means), &m64, 1e-3, tol(&m64));
     assert_close("sh f32 vs f64", &pg.sh, &pg64.sh, 1e-3, tol(&pg64.sh));
     assert_close("op f32 vs f64", &bg.opacity, &bg64.opacity, 1e-3, tol(&bg64.opacity));
+}
+
+// ---------------------------------------------------------------------------------------------
+// 3. Numerical extremes (DESIGN §6): finite outputs and gradients, or documented culling.
+
+/// Renders `s` and back-propagates random upstream gradients; asserts everything is finite and
+/// that culled Gaussians get exactly zero gradients.
+fn finite_everything(what: &str, s: &Scene) -> (Projected, BlendOut, BlendGrads, ProjectGrads) {
+    let k = s.params.feature_dims as usize;
+    let up = Upstream::random(&mut Pcg64::seed_from_u64(99), s.npix(), k);
+    let r = s.grads(&up);
+    let (proj, out, bg, pg) = &r;
+    assert_all_finite(what, out, bg, pg);
+    for (p, (a, t)) in out.alpha.iter().zip(&out.final_t).enumerate() {
+        assert!((a + t - 1.0).abs() < 1e-6, "{what}: alpha + T != 1 at {p}");
+        assert!((0.0..=1.0).contains(t), "{what}: T = {t} at {p}");
+    }
+    for i in 0..proj.radius.len() {
+        if proj.radius[i] == 0 {
+            assert_eq!(proj.tile_rect[i], [0; 4], "{what}: culled {i} has a rect");
+            let zero = pg.means[i] == [0.0; 3]
+                && pg.scales[i] == [0.0; 3]
+                && pg.quats[i] == [0.0; 4]
+                && pg.opacity_logits[i] == 0.0
+                && bg.mean2d[i] == [0.0; 2];
+            assert!(zero, "{what}: culled Gaussian {i} has a gradient");
+        }
+    }
+    r
+}
+
+fn background_only(what: &str, s: &Scene, out: &BlendOut) {
+    for p in 0..s.npix() {
+        assert_eq!(out.rgb[p], s.params.background, "{what}: pixel {p}");
+        assert_eq!(out.alpha[p], 0.0, "{what}: pixel {p}");
+        assert_eq!(out.n_contrib[p], 0, "{what}: pixel {p}");
+    }
+}
+
+fn cam_with_bg(w: u32, h: u32) -> Scene {
+    let mut s = Scene::empty(identity_camera(w, h, 30.0), 16, 3);
+    s.params.background = [0.1, 0.2, 0.3];
+    s.params.feature_dims = 2;
+    s
+}
+
+#[test]
+fn extreme_scales() {
+    let mut s = cam_with_bg(40, 32);
+    let q = [0.9, 0.1, -0.3, 0.2];
+    s.push([0.0, 0.0, 4.0], [1e-8; 3], q, 1.0, [0.9, 0.2, 0.1]);
+    s.push([0.3, 0.1, 5.0], [1e4; 3], q, -1.0, [0.1, 0.9, 0.1]);
+    s.push([-0.3, 0.2, 4.5], [1e-8, 1e4, 1.0], q, 0.5, [0.1, 0.2, 0.9]);
+    s.push([0.2, -0.2, 3.5], [0.0; 3], q, 2.0, [0.5, 0.5, 0.5]); // singular Σ3
+    let (proj, out, _, _) = finite_everything("extreme scales", &s);
+    // All visible: the tiny ones are dilated to ~0.3 px², the huge one covers every tile.
+    assert!(proj.radius.iter().all(|&r| r > 0));
+    assert_eq!(proj.tile_rect[1], [0, 0, 3, 2]);
+    // The tiny Gaussian's peak: Σ2 ≈ 0.3·I, so its conic is ≈ 1/0.3.
+    assert!((proj.conic[0][0] - 1.0 / 0.3).abs() < 1e-4);
+    assert!(out.alpha.iter().all(|&a| a > 0.0), "the 1e4 Gaussian covers everything");
+}
+
+#[test]
+fn extreme_opacity_logits() {
+    let mut s = cam_with_bg(20, 20);
+    s.push([0.0, 0.0, 4.0], [0.2; 3], IDQ, -30.0, [0.9, 0.2, 0.1]);
+    s.push([0.0, 0.0, 5.0], [0.2; 3], IDQ, -1000.0, [0.9, 0.2, 0.1]);
+    let (proj, out, _, pg) = finite_everything("logit -30", &s);
+    assert!(proj.opacity[0] > 0.0 && proj.opacity[0] < 1e-12);
+    assert_eq!(proj.opacity[1], 0.0);
+    background_only("logit -30", &s, &out);
+    assert_eq!(pg.opacity_logits, vec![0.0, 0.0], "skipped everywhere: no gradient");
+
+    let mut s = cam_with_bg(21, 21);
+    s.push([0.0, 0.0, 4.0], [0.2; 3], IDQ, 30.0, [0.9, 0.2, 0.1]);
+    s.push([1.0, 1.0, 5.0], [0.2; 3], IDQ, 1000.0, [0.9, 0.2, 0.1]);
+    let (proj, out, _, _) = finite_everything("logit +30", &s);
+    assert_eq!(proj.opacity, vec![1.0, 1.0]);
+    // The centre pixel (on the first mean) has α clamped at alpha_max = 0.99.
+    let centre = (10 * 21 + 10) as usize;
+    assert!((out.alpha[centre] - 0.99).abs() < 1e-6);
+}
+
+#[test]
+fn near_zero_quaternion_is_identity() {
+    let mut s = cam_with_bg(24, 24);
+    let scale = [0.1, 0.3, 0.2];
+    s.push([0.0, 0.0, 4.0], scale, [0.0; 4], 1.0, [0.9, 0.2, 0.1]);
+    s.push([0.3, 0.0, 4.0], scale, [1e-20, 0.0, 0.0, 0.0], 1.0, [0.9, 0.2, 0.1]);
+    s.push([-0.3, 0.0, 4.0], scale, [1e-13, -1e-13, 0.0, 1e-14], 1.0, [0.9, 0.2, 0.1]);
+    s.push([0.0, 0.3, 4.0], scale, [1e-6, 0.0, 0.0, 0.0], 1.0, [0.9, 0.2, 0.1]);
+    let (proj, _, _, pg) = finite_everything("zero quaternion", &s);
+    let mut id = s.clone();
+    id.quats = vec![IDQ; 4];
+    let proj_id = project(&id.cam, &id.g());
+    // Norms below 1e-12 become the identity; 1e-6 normalises to the identity exactly.
+    assert_eq!(proj.conic, proj_id.conic);
+    for i in 0..3 {
+        assert_eq!(pg.quats[i], [0.0; 4], "quaternion {i} below 1e-12: no gradient");
+    }
+    assert!(pg.scales[0].iter().any(|v| *v != 0.0));
+}
+
+#[test]
+fn behind_camera_and_near_plane() {
+    let mut s = cam_with_bg(32, 32);
+    let near = s.cam.near;
+    let below = f32::from_bits(near.to_bits() - 1);
+    s.push([0.0, 0.0, -5.0], [0.3; 3], IDQ, 1.0, [0.9, 0.2, 0.1]); // behind
+    s.push([0.0, 0.0, 0.0], [0.3; 3], IDQ, 1.0, [0.9, 0.2, 0.1]); // at the camera centre
+    s.push([0.0, 0.0, below], [0.01; 3], IDQ, 1.0, [0.9, 0.2, 0.1]); // just inside near
+    s.push([f32::NAN, 0.0, 3.0], [0.3; 3], IDQ, 1.0, [0.9, 0.2, 0.1]); // not finite
+    s.push([0.0, 0.0, near], [0.01; 3], IDQ, 1.0, [0.1, 0.2, 0.9]); // exactly on the near plane
+    let (proj, out, _, pg) = finite_everything("near plane", &s);
+    assert_eq!(proj.radius[..4], [0, 0, 0, 0], "culled: z < near or not finite");
+    // z == near is kept (culling is z < near): a 0.01 Gaussian 0.01 ahead covers the view.
+    assert!(proj.radius[4] > 0);
+    assert_eq!(proj.depth[4], near);
+    assert!(out.alpha.iter().all(|&a| a > 0.0));
+    assert!(pg.means[4].iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn camera_inside_gaussian() {
+    let mut s = cam_with_bg(32, 24);
+    s.push([0.0, 0.0, 0.5], [10.0, 8.0, 12.0], [0.8, 0.2, 0.1, -0.3], 0.0, [0.3, 0.6, 0.9]);
+    s.push([0.1, -0.1, 0.02], [5.0; 3], IDQ, -0.5, [0.9, 0.6, 0.3]);
+    let (proj, out, _, _) = finite_everything("camera inside", &s);
+    assert!(proj.radius.iter().all(|&r| r > 0));
+    assert!(out.alpha.iter().all(|&a| a > 0.3), "both cover the whole image");
+}
+
+#[test]
+fn zero_gaussians() {
+    let s = cam_with_bg(17, 13);
+    let (proj, out, bg, pg) = finite_everything("zero Gaussians", &s);
+    assert!(proj.radius.is_empty() && bg.features.is_empty() && pg.sh.is_empty());
+    background_only("zero Gaussians", &s, &out);
+    assert!(out.features.iter().all(|&f| f == 0.0) && out.final_t.iter().all(|&t| t == 1.0));
+}
+
+#[test]
+fn all_culled() {
+    let mut s = cam_with_bg(17, 13);
+    s.push([0.0, 0.0, -1.0], [0.3; 3], IDQ, 1.0, [0.9, 0.2, 0.1]); // behind
+    s.push([100.0, 0.0, 2.0], [0.01; 3], IDQ, 1.0, [0.9, 0.2, 0.1]); // far off-screen
+    s.push([0.0, -50.0, 2.0], [0.01; 3], IDQ, 1.0, [0.9, 0.2, 0.1]); // far off-screen
+    let (proj, out, _, pg) = finite_everything("all culled", &s);
+    assert_eq!(proj.radius, vec![0, 0, 0]);
+    background_only("all culled", &s, &out);
+    assert!(pg.sh.iter().all(|&v| v == 0.0));
+}
+
+#[test]
+fn one_by_one_image() {
+    let mut s = cam_with_bg(1, 1);
+    s.cam.fx = 2.0;
+    s.cam.fy = 2.0;
+    s.push([0.0, 0.0, 3.0], [0.5; 3], IDQ, 1.0, [0.9, 0.2, 0.1]);
+    let (proj, out, bg, _) = finite_everything("1x1", &s);
+    assert_eq!(proj.tile_rect[0], [0, 0, 1, 1]);
+    assert_eq!(out.n_contrib, vec![1]);
+    assert!(bg.opacity[0] != 0.0);
+}
+
+#[test]
+fn non_multiple_of_16_image() {
+    let mut s = cam_with_bg(17, 13);
+    s.params.feature_dims = 0;
+    // Centred on the bottom-right pixel (16, 12): mean2d = (16.5, 12.5).
+    let z = 4.0f32;
+    let (u, v) = (16.5f32, 12.5f32);
+    let mean = [(u - s.cam.cx) * z / s.cam.fx, (v - s.cam.cy) * z / s.cam.fy, z];
+    s.push(mean, [0.01; 3], IDQ, 1.0, [0.9, 0.2, 0.1]);
+    let (proj, out, _, _) = finite_everything("17x13", &s);
+    assert_eq!(s.cam.tiles(), (2, 1));
+    assert!((proj.mean2d[0][0] - 16.5).abs() < 1e-4 && (proj.mean2d[0][1] - 12.5).abs() < 1e-4);
+    assert_eq!(proj.tile_rect[0], [0, 0, 2, 1]);
+    let last = s.npix() - 1;
+    assert!(out.alpha[last] > 0.5, "bottom-right pixel is drawn");
+    assert_eq!(out.alpha[0], 0.0, "top-left pixel is not");
+}
+
+#[test]
+fn many_gaussians_in_one_tile() {
+    let mut s = cam_with_bg(16, 16);
+    s.params.feature_dims = 0;
+    let mut rng = Pcg64::seed_from_u64(7);
+    let n = 10_000;
+    for _ in 0..n {
+        let z = rng.gen_range(3.0..6.0f32);
+        let (u, v) = (rng.gen_range(0.0..16.0f32), rng.gen_range(0.0..16.0f32));
+        let mean = [(u - s.cam.cx) * z / s.cam.fx, (v - s.cam.cy) * z / s.cam.fy, z];
+        let rgb = [rng.gen(), rng.gen(), rng.gen()];
+        s.push(mean, [0.2; 3], [1.0, 0.2, 0.0, 0.1], -3.0, rgb);
+    }
+    let (proj, out, bg, _) = finite_everything("10^4 in one tile", &s);
+    assert!(proj.tile_rect.iter().all(|r| *r == [0, 0, 1, 1]));
+    // Every pixel saturates and stops before the end of its list: T ≥ 1e-4 remains.
+    for p in 0..s.npix() {
+        assert!(out.final_t[p] >= 1e-4 && out.final_t[p] < 1e-3, "T = {}", out.final_t[p]);
+        assert!(out.n_contrib[p] > 0 && (out.n_contrib[p] as usize) < n);
+    }
+    assert!(bg.opacity.iter().any(|&v| v != 0.0));
+}
+
+// ---------------------------------------------------------------------------------------------
+// 4. Hand-checkable scenes
+
+/// One isotropic Gaussian straight ahead: Σ2 = ((f·s/z)² + 0.3)·I, so conic = (1/v, 0, 1/v).
+fn single(w: u32, logit: f32, bg: [f32; 3]) -> (Scene, f64) {
+    let (f, s_, z) = (30.0f32, 0.3f32, 4.0f32);
+    let mut s = Scene::empty(identity_camera(w, w, f), 1, 0);
+    s.params.background = bg;
+    s.push([0.0, 0.0, z], [s_; 3], IDQ, logit, [0.2, 0.5, 0.8]);
+    let v = (f as f64 * s_ as f64 / z as f64).powi(2) + 0.3;
+    (s, v)
+}
+
+#[test]
+fn single_gaussian_peak_equals_opacity_times_colour() {
+    let (s, v) = single(33, 0.0, [0.0; 3]);
+    let (proj, out) = s.render();
+    let conic = proj.conic[0].map(|x| x as f64);
+    assert_close("conic", &conic, &[1.0 / v, 0.0, 1.0 / v], 1e-6, 1e-7);
+    assert_eq!(proj.opacity[0], 0.5);
+    // 33×33, cx = 16.5: pixel (16, 16)'s centre is the mean exactly.
+    let c = 16 * 33 + 16;
+    let want = [0.2, 0.5, 0.8].map(|x| 0.5 * x);
+    let got = out.rgb[c].map(|x| x as f64);
+    assert_close("peak", &got, &want, 0.0, 1e-6);
+    assert!((out.alpha[c] - 0.5).abs() < 1e-6);
+    assert!((out.depth[c] - 2.0).abs() < 1e-6, "depth = w·z = 0.5·4");
+    // One pixel to the right: dx = −1, σ = 0.5/v.
+    let a = 0.5 * (-0.5 / v).exp();
+    assert!((out.alpha[c + 1] as f64 - a).abs() < 1e-6);
+
+    // 32×32, cx = 16: the nearest pixel centres are half a pixel off in x and y, σ = 0.25/v.
+    let (s, v) = single(32, 0.0, [0.0; 3]);
+    let (_, out) = s.render();
+    let a = 0.5 * (-0.25 / v).exp();
+    for p in [(15, 15), (16, 15), (15, 16), (16, 16)] {
+        let got = out.rgb[p.1 * 32 + p.0].map(|x| x as f64);
+        assert_close("off-centre peak", &got, &[0.2, 0.5, 0.8].map(|x| a * x), 0.0, 1e-6);
+    }
+}
+
+#[test]
+fn alpha_max_clamp_and_background() {
+    let bg = [0.1, 0.2, 0.3];
+    for alpha_max in [0.99f32, 0.999] {
+        let (mut s, _) = single(33, 30.0, bg);
+        s.params.alpha_max = alpha_max;
+        let (_, out) = s.render();
+        let c = 16 * 33 + 16;
+        let a = alpha_max as f64;
+        let want: Vec<f64> = (0..3)
+            .map(|k| a * [0.2, 0.5, 0.8][k] + (1.0 - a) * bg[k] as f64)
+            .collect();
+        assert_close("clamped peak", &out.rgb[c].map(|x| x as f64), &want, 0.0, 1e-6);
+        assert!((out.alpha[c] as f64 - a).abs() < 1e-6);
+        // The clamp holds the gradient wrt opacity at that pixel at 0: only the clamped pixel
+        // gets an upstream gradient, so the opacity gradient vanishes.
+        let mut d_alpha = vec![0.0f32; s.npix()];
+        d_alpha[c] = 1.0;
+        let bgr = blend_bwd(&s.params, &s.render().0, &[], &out, &[], &d_alpha, &[], &[]);
+        assert_eq!(bgr.opacity[0], 0.0);
+        assert_eq!(bgr.mean2d[0], [0.0, 0.0]);
+        // A corner far from the Gaussian shows the background exactly.
+        assert_eq!(out.rgb[0], bg);
+        assert_eq!((out.alpha[0], out.final_t[0], out.n_contrib[0]), (0.0, 1.0, 0));
+    }
+}
+
+#[test]
+fn depth_order_ties_skip_and_stop() {
+    let bg = [0.1, 0.2, 0.3];
+    let mut s = Scene::empty(identity_camera(33, 33, 30.0), 1, 0);
+    s.params.background = bg;
+    s.params.alpha_max = 0.999;
+    let c = 16 * 33 + 16;
+    let (c_back, c_front) = ([0.9f64, 0.1, 0.1], [0.1f64, 0.9, 0.1]);
+    let (cb32, cf32) = (c_back.map(|x| x as f32), c_front.map(|x| x as f32));
+    // Index 0 behind index 1: index 1 blends first.
+    s.push([0.0, 0.0, 5.0], [0.3; 3], IDQ, 0.0, cb32);
+    s.push([0.0, 0.0, 3.0], [0.3; 3], IDQ, 1.0, cf32);
+    let (_, out) = s.render();
+    let af = sigmoid(1.0) as f32 as f64;
+    let want: Vec<f64> = (0..3)
+        .map(|k| af * c_front[k] + (1.0 - af) * 0.5 * c_back[k] + (1.0 - af) * 0.5 * bg[k] as f64)
+        .collect();
+    assert_close("two layers", &out.rgb[c].map(|x| x as f64), &want, 0.0, 1e-6);
+    assert_eq!(out.n_contrib[c], 2);
+
+    // Equal depths: ties go by index (index 0 first).
+    let mut t = s.clone();
+    t.means[1][2] = 5.0;
+    let (_, out) = t.render();
+    let want: Vec<f64> = (0..3)
+        .map(|k| 0.5 * c_back[k] + 0.5 * af * c_front[k] + 0.5 * (1.0 - af) * bg[k] as f64)
+        .collect();
+    assert_close("tie by index", &out.rgb[c].map(|x| x as f64), &want, 0.0, 1e-6);
+
+    // α < 1/255 in front is skipped but counts in n_contrib's position.
+    let mut u = s.clone();
+    u.push([0.0, 0.0, 2.0], [0.3; 3], IDQ, -30.0, [1.0; 3]);
+    let (_, out_u) = u.render();
+    assert_eq!(out_u.n_contrib[c], 3);
+    let (_, out_s) = s.render();
+    assert_eq!(out_u.rgb[c], out_s.rgb[c]);
+
+    // Stop: after one α = 0.999 layer T = 1e-3; a second would take it to 1e-6 < 1e-4, so it is
+    // not blended and the pixel is done (the third is never reached).
+    let mut v = Scene::empty(identity_camera(33, 33, 30.0), 1, 0);
+    v.params = s.params;
+    v.push([0.0, 0.0, 3.0], [0.3; 3], IDQ, 30.0, cf32);
+    v.push([0.0, 0.0, 4.0], [0.3; 3], IDQ, 30.0, cb32);
+    v.push([0.0, 0.0, 5.0], [0.3; 3], IDQ, 0.0, cb32);
+    let (_, out) = v.render();
+    assert_eq!(out.n_contrib[c], 1);
+    let a = 0.999f32 as f64;
+    assert!((out.final_t[c] as f64 - (1.0 - a)).abs() < 1e-9);
+    let want: Vec<f64> = (0..3)
+        .map(|k| a * c_front[k] + (1.0 - a) * bg[k] as f64)
+        .collect();
+    assert_close("stop", &out.rgb[c].map(|x| x as f64), &want, 0.0, 1e-6);
+}
+
+#[test]
+fn sh_basis_matches_3dgs_formulas() {
+    // A few hand-evaluated basis values at dir = (x, y, z) = (0.48, 0.6, 0.64).
+    let d = [0.48, 0.6, 0.64];
+    let b = sh::basis(3, d);
+    assert_eq!(b[0], sh::C0);
+    assert!((b[1] + sh::C1 * 0.6).abs() < 1e-15);
+    assert!((b[3] + sh::C1 * 0.48).abs() < 1e-15);
+    assert!((b[6] - sh::C2[2] * (2.0 * 0.4096 - 0.2304 - 0.36)).abs() < 1e-15);
+    assert!((b[15] - sh::C3[6] * 0.48 * (0.2304 - 3.0 * 0.36)).abs() < 1e-15);
+    assert_eq!(sh::basis(1, d)[4..], [0.0; 12]);
 }
