@@ -55,9 +55,9 @@ impl Scene {
         self.quats.push(quat);
         self.logits.push(logit);
         for k in 0..self.sh_coeffs {
-            for c in 0..3 {
+            for &col in &rgb {
                 let v = if k == 0 {
-                    ((rgb[c] as f64 - 0.5) / sh::C0) as f32
+                    ((col as f64 - 0.5) / sh::C0) as f32
                 } else {
                     0.0
                 };
@@ -256,7 +256,10 @@ fn gsplat_case(name: &str) {
     let means = v3(get("means"));
     let log_scales = v3(get("scales"));
     let scales: Vec<[f32; 3]> = log_scales.iter().map(|s| s.map(f32::exp)).collect();
-    let quats: Vec<[f32; 4]> = get("quats").chunks(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+    let quats: Vec<[f32; 4]> = get("quats")
+        .chunks(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect();
     let g = Gaussians {
         means: &means,
         scales: &scales,
@@ -276,15 +279,30 @@ fn gsplat_case(name: &str) {
     };
     let proj = project(&cam, &g);
     let wide = |v: &[f32]| -> Vec<f64> { v.iter().map(|&x| x as f64).collect() };
-    assert!(proj.radius.iter().all(|&r| r > 0), "{name}: a Gaussian was culled");
+    assert!(
+        proj.radius.iter().all(|&r| r > 0),
+        "{name}: a Gaussian was culled"
+    );
 
     // Projection: gsplat computes in f32, so agreement is to f32 rounding of the operations
     // (|xy| ≤ ~150 px: a few ulp ≈ 1e-5; conics go through a 2×2 inverse: rel 1e-5).
     let xys: Vec<f64> = proj.mean2d.iter().flatten().map(|&x| x as f64).collect();
     assert_close(&format!("{name} xys"), &xys, &wide(get("xys")), 1e-6, 1e-4);
     let conics: Vec<f64> = proj.conic.iter().flatten().map(|&x| x as f64).collect();
-    assert_close(&format!("{name} conics"), &conics, &wide(get("conics")), 1e-5, 1e-7);
-    assert_close(&format!("{name} depths"), &wide(&proj.depth), &wide(get("depths")), 1e-6, 1e-6);
+    assert_close(
+        &format!("{name} conics"),
+        &conics,
+        &wide(get("conics")),
+        1e-5,
+        1e-7,
+    );
+    assert_close(
+        &format!("{name} depths"),
+        &wide(&proj.depth),
+        &wide(get("depths")),
+        1e-6,
+        1e-6,
+    );
 
     // Forward image: RGB + accumulated alpha, to ~1e-5 (README: an f64 re-implementation
     // agreed to < 5e-6).
@@ -294,7 +312,13 @@ fn gsplat_case(name: &str) {
         img.extend(rgb.iter().map(|&x| x as f64));
         img.push(*a as f64);
     }
-    assert_close(&format!("{name} out_img"), &img, &wide(get("out_img")), 0.0, 1e-5);
+    assert_close(
+        &format!("{name} out_img"),
+        &img,
+        &wide(get("out_img")),
+        0.0,
+        1e-5,
+    );
 
     // Backward with v_out_img as the upstream gradient.
     let v_out = get("v_out_img");
@@ -309,14 +333,29 @@ fn gsplat_case(name: &str) {
         let want = wide(get(key));
         // The comparison must not be vacuous (all values below the absolute tolerance).
         let big = want.iter().filter(|w| w.abs() > 100.0 * abs).count();
-        assert!(big * 2 > want.len(), "{name} {key}: mostly tiny reference values");
+        assert!(
+            big * 2 > want.len(),
+            "{name} {key}: mostly tiny reference values"
+        );
         assert_close(&format!("{name} {what}"), &got, &want, rel, abs)
     };
     // gsplat's v_xy and v_conics use the same conventions as BlendGrads: d = mean2d − pixel
     // centre and σ = ½(a dx² + c dy²) + b dx dy, so they compare without conversion.
-    chk("v_xy", bg.mean2d.iter().flatten().copied().collect(), "v_xy");
-    chk("v_conics", bg.conic.iter().flatten().copied().collect(), "v_conics");
-    chk("v_means", pg.means.iter().flatten().copied().collect(), "v_means");
+    chk(
+        "v_xy",
+        bg.mean2d.iter().flatten().copied().collect(),
+        "v_xy",
+    );
+    chk(
+        "v_conics",
+        bg.conic.iter().flatten().copied().collect(),
+        "v_conics",
+    );
+    chk(
+        "v_means",
+        pg.means.iter().flatten().copied().collect(),
+        "v_means",
+    );
     // gsplat's scales are log-scales: d/d(log s) = s · d/ds.
     let v_log_scales = pg
         .scales
@@ -325,7 +364,11 @@ fn gsplat_case(name: &str) {
         .flat_map(|(d, s)| [0, 1, 2].map(|k| d[k] * s[k] as f64))
         .collect();
     chk("v_scales", v_log_scales, "v_scales");
-    chk("v_quats", pg.quats.iter().flatten().copied().collect(), "v_quats");
+    chk(
+        "v_quats",
+        pg.quats.iter().flatten().copied().collect(),
+        "v_quats",
+    );
     chk("v_opacities", pg.opacity_logits.clone(), "v_opacities");
     chk("v_coeffs", pg.sh.clone(), "v_coeffs");
 }
@@ -425,8 +468,9 @@ fn random_scene(seed: u64, w: u32, h: u32, n: usize, k: u32, sh_coeffs: u32, deg
             ),
         };
         s.means.push(world([xz * z, yz * z, z]));
-        s.scales
-            .push(std::array::from_fn(|_| (scale * rng.gen_range(0.5..1.5)) as f32));
+        s.scales.push(std::array::from_fn(|_| {
+            (scale * rng.gen_range(0.5..1.5)) as f32
+        }));
         let q: [f32; 4] = loop {
             let q = std::array::from_fn(|_| rng.gen_range(-1.0f32..1.0));
             if q.iter().map(|v| v * v).sum::<f32>() > 0.1 {
@@ -528,7 +572,11 @@ fn check_fd(s: &Scene, up_seed: u64) {
 
     let proj = project_f64(&s.cam, &g);
     let visible = proj.radius.iter().filter(|&&r| r > 0).count();
-    assert!(visible + 1 >= g.len(), "scene: {visible} of {} visible", g.len());
+    assert!(
+        visible + 1 >= g.len(),
+        "scene: {visible} of {} visible",
+        g.len()
+    );
     let bg = blend_bwd_f64(
         &s.params,
         &proj,
@@ -549,7 +597,11 @@ fn check_fd(s: &Scene, up_seed: u64) {
     }
     let nc = s.sh_coeffs as usize;
     for kk in 0..nc {
-        assert_eq!(pg.sh[(2 * nc + kk) * 3], 0.0, "clamped red channel has a gradient");
+        assert_eq!(
+            pg.sh[(2 * nc + kk) * 3],
+            0.0,
+            "clamped red channel has a gradient"
+        );
     }
 
     // The α clamp must be engaged somewhere (α of Gaussian 3 at some pixel centre).
@@ -601,14 +653,20 @@ fn check_fd(s: &Scene, up_seed: u64) {
         }
         assert!(!an.is_empty(), "{kind:?}: nothing checked");
         if kind != Kind::Features || k > 0 {
-            assert!(scale > 1e-3, "{kind:?}: gradient is vacuous (max {scale:e})");
+            assert!(
+                scale > 1e-3,
+                "{kind:?}: gradient is vacuous (max {scale:e})"
+            );
         }
         // FD error: rounding ≈ 1e-16·|L|/h plus truncation O(h²); both ≪ 1e-6·(1 + |L|).
         let abs = 1e-7 * (1.0 + l0.abs());
         assert_close(&format!("FD {kind:?} seed {up_seed}"), &an, &fd, 1e-5, abs);
     }
     eprintln!("FD seed {up_seed}: {total} parameters, {skipped} skipped as straddling");
-    assert!(skipped * 50 <= total, "{skipped} of {total} parameters straddle a threshold");
+    assert!(
+        skipped * 50 <= total,
+        "{skipped} of {total} parameters straddle a threshold"
+    );
 }
 
 #[test]
@@ -669,7 +727,13 @@ fn f32_wrappers_match_f64_path() {
     let m64 = flat(&pg64.means);
     assert_close("means f32 vs f64", &flat(&pg.means), &m64, 1e-3, tol(&m64));
     assert_close("sh f32 vs f64", &pg.sh, &pg64.sh, 1e-3, tol(&pg64.sh));
-    assert_close("op f32 vs f64", &bg.opacity, &bg64.opacity, 1e-3, tol(&bg64.opacity));
+    assert_close(
+        "op f32 vs f64",
+        &bg.opacity,
+        &bg64.opacity,
+        1e-3,
+        tol(&bg64.opacity),
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -730,7 +794,10 @@ fn extreme_scales() {
     assert_eq!(proj.tile_rect[1], [0, 0, 3, 2]);
     // The tiny Gaussian's peak: Σ2 ≈ 0.3·I, so its conic is ≈ 1/0.3.
     assert!((proj.conic[0][0] - 1.0 / 0.3).abs() < 1e-4);
-    assert!(out.alpha.iter().all(|&a| a > 0.0), "the 1e4 Gaussian covers everything");
+    assert!(
+        out.alpha.iter().all(|&a| a > 0.0),
+        "the 1e4 Gaussian covers everything"
+    );
 }
 
 #[test]
@@ -742,7 +809,11 @@ fn extreme_opacity_logits() {
     assert!(proj.opacity[0] > 0.0 && proj.opacity[0] < 1e-12);
     assert_eq!(proj.opacity[1], 0.0);
     background_only("logit -30", &s, &out);
-    assert_eq!(pg.opacity_logits, vec![0.0, 0.0], "skipped everywhere: no gradient");
+    assert_eq!(
+        pg.opacity_logits,
+        vec![0.0, 0.0],
+        "skipped everywhere: no gradient"
+    );
 
     let mut s = cam_with_bg(21, 21);
     s.push([0.0, 0.0, 4.0], [0.2; 3], IDQ, 30.0, [0.9, 0.2, 0.1]);
@@ -759,9 +830,27 @@ fn near_zero_quaternion_is_identity() {
     let mut s = cam_with_bg(24, 24);
     let scale = [0.1, 0.3, 0.2];
     s.push([0.0, 0.0, 4.0], scale, [0.0; 4], 1.0, [0.9, 0.2, 0.1]);
-    s.push([0.3, 0.0, 4.0], scale, [1e-20, 0.0, 0.0, 0.0], 1.0, [0.9, 0.2, 0.1]);
-    s.push([-0.3, 0.0, 4.0], scale, [1e-13, -1e-13, 0.0, 1e-14], 1.0, [0.9, 0.2, 0.1]);
-    s.push([0.0, 0.3, 4.0], scale, [1e-6, 0.0, 0.0, 0.0], 1.0, [0.9, 0.2, 0.1]);
+    s.push(
+        [0.3, 0.0, 4.0],
+        scale,
+        [1e-20, 0.0, 0.0, 0.0],
+        1.0,
+        [0.9, 0.2, 0.1],
+    );
+    s.push(
+        [-0.3, 0.0, 4.0],
+        scale,
+        [1e-13, -1e-13, 0.0, 1e-14],
+        1.0,
+        [0.9, 0.2, 0.1],
+    );
+    s.push(
+        [0.0, 0.3, 4.0],
+        scale,
+        [1e-6, 0.0, 0.0, 0.0],
+        1.0,
+        [0.9, 0.2, 0.1],
+    );
     let (proj, _, _, pg) = finite_everything("zero quaternion", &s);
     let mut id = s.clone();
     id.quats = vec![IDQ; 4];
@@ -769,7 +858,10 @@ fn near_zero_quaternion_is_identity() {
     // Norms below 1e-12 become the identity; 1e-6 normalises to the identity exactly.
     assert_eq!(proj.conic, proj_id.conic);
     for i in 0..3 {
-        assert_eq!(pg.quats[i], [0.0; 4], "quaternion {i} below 1e-12: no gradient");
+        assert_eq!(
+            pg.quats[i], [0.0; 4],
+            "quaternion {i} below 1e-12: no gradient"
+        );
     }
     assert!(pg.scales[0].iter().any(|v| *v != 0.0));
 }
@@ -785,7 +877,11 @@ fn behind_camera_and_near_plane() {
     s.push([f32::NAN, 0.0, 3.0], [0.3; 3], IDQ, 1.0, [0.9, 0.2, 0.1]); // not finite
     s.push([0.0, 0.0, near], [0.01; 3], IDQ, 1.0, [0.1, 0.2, 0.9]); // exactly on the near plane
     let (proj, out, _, pg) = finite_everything("near plane", &s);
-    assert_eq!(proj.radius[..4], [0, 0, 0, 0], "culled: z < near or not finite");
+    assert_eq!(
+        proj.radius[..4],
+        [0, 0, 0, 0],
+        "culled: z < near or not finite"
+    );
     // z == near is kept (culling is z < near): a 0.01 Gaussian 0.01 ahead covers the view.
     assert!(proj.radius[4] > 0);
     assert_eq!(proj.depth[4], near);
@@ -796,11 +892,20 @@ fn behind_camera_and_near_plane() {
 #[test]
 fn camera_inside_gaussian() {
     let mut s = cam_with_bg(32, 24);
-    s.push([0.0, 0.0, 0.5], [10.0, 8.0, 12.0], [0.8, 0.2, 0.1, -0.3], 0.0, [0.3, 0.6, 0.9]);
+    s.push(
+        [0.0, 0.0, 0.5],
+        [10.0, 8.0, 12.0],
+        [0.8, 0.2, 0.1, -0.3],
+        0.0,
+        [0.3, 0.6, 0.9],
+    );
     s.push([0.1, -0.1, 0.02], [5.0; 3], IDQ, -0.5, [0.9, 0.6, 0.3]);
     let (proj, out, _, _) = finite_everything("camera inside", &s);
     assert!(proj.radius.iter().all(|&r| r > 0));
-    assert!(out.alpha.iter().all(|&a| a > 0.3), "both cover the whole image");
+    assert!(
+        out.alpha.iter().all(|&a| a > 0.3),
+        "both cover the whole image"
+    );
 }
 
 #[test]
@@ -843,7 +948,11 @@ fn non_multiple_of_16_image() {
     // Centred on the bottom-right pixel (16, 12): mean2d = (16.5, 12.5).
     let z = 4.0f32;
     let (u, v) = (16.5f32, 12.5f32);
-    let mean = [(u - s.cam.cx) * z / s.cam.fx, (v - s.cam.cy) * z / s.cam.fy, z];
+    let mean = [
+        (u - s.cam.cx) * z / s.cam.fx,
+        (v - s.cam.cy) * z / s.cam.fy,
+        z,
+    ];
     s.push(mean, [0.01; 3], IDQ, 1.0, [0.9, 0.2, 0.1]);
     let (proj, out, _, _) = finite_everything("17x13", &s);
     assert_eq!(s.cam.tiles(), (2, 1));
@@ -863,7 +972,11 @@ fn many_gaussians_in_one_tile() {
     for _ in 0..n {
         let z = rng.gen_range(3.0..6.0f32);
         let (u, v) = (rng.gen_range(0.0..16.0f32), rng.gen_range(0.0..16.0f32));
-        let mean = [(u - s.cam.cx) * z / s.cam.fx, (v - s.cam.cy) * z / s.cam.fy, z];
+        let mean = [
+            (u - s.cam.cx) * z / s.cam.fx,
+            (v - s.cam.cy) * z / s.cam.fy,
+            z,
+        ];
         let rgb = [rng.gen(), rng.gen(), rng.gen()];
         s.push(mean, [0.2; 3], [1.0, 0.2, 0.0, 0.1], -3.0, rgb);
     }
@@ -871,7 +984,11 @@ fn many_gaussians_in_one_tile() {
     assert!(proj.tile_rect.iter().all(|r| *r == [0, 0, 1, 1]));
     // Every pixel saturates and stops before the end of its list: T ≥ 1e-4 remains.
     for p in 0..s.npix() {
-        assert!(out.final_t[p] >= 1e-4 && out.final_t[p] < 1e-3, "T = {}", out.final_t[p]);
+        assert!(
+            out.final_t[p] >= 1e-4 && out.final_t[p] < 1e-3,
+            "T = {}",
+            out.final_t[p]
+        );
         assert!(out.n_contrib[p] > 0 && (out.n_contrib[p] as usize) < n);
     }
     assert!(bg.opacity.iter().any(|&v| v != 0.0));
@@ -914,7 +1031,13 @@ fn single_gaussian_peak_equals_opacity_times_colour() {
     let a = 0.5 * (-0.25 / v).exp();
     for p in [(15, 15), (16, 15), (15, 16), (16, 16)] {
         let got = out.rgb[p.1 * 32 + p.0].map(|x| x as f64);
-        assert_close("off-centre peak", &got, &[0.2, 0.5, 0.8].map(|x| a * x), 0.0, 1e-6);
+        assert_close(
+            "off-centre peak",
+            &got,
+            &[0.2, 0.5, 0.8].map(|x| a * x),
+            0.0,
+            1e-6,
+        );
     }
 }
 
@@ -930,7 +1053,13 @@ fn alpha_max_clamp_and_background() {
         let want: Vec<f64> = (0..3)
             .map(|k| a * [0.2, 0.5, 0.8][k] + (1.0 - a) * bg[k] as f64)
             .collect();
-        assert_close("clamped peak", &out.rgb[c].map(|x| x as f64), &want, 0.0, 1e-6);
+        assert_close(
+            "clamped peak",
+            &out.rgb[c].map(|x| x as f64),
+            &want,
+            0.0,
+            1e-6,
+        );
         assert!((out.alpha[c] as f64 - a).abs() < 1e-6);
         // The clamp holds the gradient wrt opacity at that pixel at 0: only the clamped pixel
         // gets an upstream gradient, so the opacity gradient vanishes.
@@ -941,7 +1070,10 @@ fn alpha_max_clamp_and_background() {
         assert_eq!(bgr.mean2d[0], [0.0, 0.0]);
         // A corner far from the Gaussian shows the background exactly.
         assert_eq!(out.rgb[0], bg);
-        assert_eq!((out.alpha[0], out.final_t[0], out.n_contrib[0]), (0.0, 1.0, 0));
+        assert_eq!(
+            (out.alpha[0], out.final_t[0], out.n_contrib[0]),
+            (0.0, 1.0, 0)
+        );
     }
 }
 
@@ -962,7 +1094,13 @@ fn depth_order_ties_skip_and_stop() {
     let want: Vec<f64> = (0..3)
         .map(|k| af * c_front[k] + (1.0 - af) * 0.5 * c_back[k] + (1.0 - af) * 0.5 * bg[k] as f64)
         .collect();
-    assert_close("two layers", &out.rgb[c].map(|x| x as f64), &want, 0.0, 1e-6);
+    assert_close(
+        "two layers",
+        &out.rgb[c].map(|x| x as f64),
+        &want,
+        0.0,
+        1e-6,
+    );
     assert_eq!(out.n_contrib[c], 2);
 
     // Equal depths: ties go by index (index 0 first).
@@ -972,7 +1110,13 @@ fn depth_order_ties_skip_and_stop() {
     let want: Vec<f64> = (0..3)
         .map(|k| 0.5 * c_back[k] + 0.5 * af * c_front[k] + 0.5 * (1.0 - af) * bg[k] as f64)
         .collect();
-    assert_close("tie by index", &out.rgb[c].map(|x| x as f64), &want, 0.0, 1e-6);
+    assert_close(
+        "tie by index",
+        &out.rgb[c].map(|x| x as f64),
+        &want,
+        0.0,
+        1e-6,
+    );
 
     // α < 1/255 in front is skipped but counts in n_contrib's position.
     let mut u = s.clone();
@@ -1010,4 +1154,33 @@ fn sh_basis_matches_3dgs_formulas() {
     assert!((b[6] - sh::C2[2] * (2.0 * 0.4096 - 0.2304 - 0.36)).abs() < 1e-15);
     assert!((b[15] - sh::C3[6] * 0.48 * (0.2304 - 3.0 * 0.36)).abs() < 1e-15);
     assert_eq!(sh::basis(1, d)[4..], [0.0; 12]);
+}
+
+#[test]
+fn signatures_detect_threshold_crossings() {
+    // The FD tests rely on the signatures to skip straddling samples: check they see each kind
+    // of discrete decision change, and stay put for a smooth change.
+    let (s, _) = single(33, 0.0, [0.0; 3]);
+    let sig = |g: &Gaussians64| {
+        let p = project_f64(&s.cam, g);
+        let o = blend_fwd_f64(&s.params, &p, &[]);
+        (p.signature, o.signature)
+    };
+    let g0 = Gaussians64::from_f32(&s.g());
+    let base = sig(&g0);
+    let mut g = g0.clone();
+    g.opacity_logits[0] += 1e-6; // smooth (an FD step)
+    assert_eq!(sig(&g), base);
+    g.opacity_logits[0] = 6.0; // α clamped at the centre pixel
+    assert_eq!(sig(&g).0, base.0);
+    assert_ne!(sig(&g).1, base.1);
+    let mut g = g0.clone();
+    g.opacity_logits[0] = -5.0; // fewer pixels pass α ≥ 1/255
+    assert_ne!(sig(&g).1, base.1);
+    let mut g = g0.clone();
+    g.means[0][0] = 3.0; // x/z = 0.75 > lim_x_pos = 0.7: Jacobian clamp
+    assert_ne!(sig(&g).0, base.0);
+    let mut g = g0.clone();
+    g.sh[0] = -3.0; // red channel clamped at 0
+    assert_ne!(sig(&g).0, base.0);
 }

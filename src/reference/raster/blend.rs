@@ -198,8 +198,16 @@ pub fn blend_bwd(
     d_features: &[f32],
 ) -> BlendGrads {
     let npix = (p.width * p.height) as usize;
-    assert_eq!(fwd.final_t.len(), npix, "blend_bwd: fwd is for another image size");
-    assert_eq!(fwd.n_contrib.len(), npix, "blend_bwd: fwd is for another image size");
+    assert_eq!(
+        fwd.final_t.len(),
+        npix,
+        "blend_bwd: fwd is for another image size"
+    );
+    assert_eq!(
+        fwd.n_contrib.len(),
+        npix,
+        "blend_bwd: fwd is for another image size"
+    );
     let f64s: Vec<f64> = features.iter().map(|&x| x as f64).collect();
     blend_bwd_f64(
         p,
@@ -253,7 +261,8 @@ pub fn blend_bwd_f64(
         for px in 0..p.width {
             let pix = (py * p.width + px) as usize;
             let (list, _, _) = walk_pixel(p, proj, &order, px, py, &mut sig);
-            let drgb: [f64; 3] = std::array::from_fn(|c| d_rgb.get(pix).map_or(0.0, |v| v[c] as f64));
+            let drgb: [f64; 3] =
+                std::array::from_fn(|c| d_rgb.get(pix).map_or(0.0, |v| v[c] as f64));
             let dalpha = up(d_alpha, pix);
             let ddepth = up(d_depth, pix);
             // rgb += T_final·bg, alpha = 1 − T_final.

@@ -21,6 +21,9 @@
 //! - front-to-back blending with `α = min(alpha_max, o·exp(−σ))`, skip `σ < 0` or `α < 1/255`,
 //!   stop (without blending) when the transmittance would drop below `1e-4`.
 
+// Index loops on purpose: they read like the GLSL they define.
+#![allow(clippy::needless_range_loop)]
+
 mod blend;
 mod project;
 
@@ -136,7 +139,11 @@ impl Gaussians64 {
     /// Panics with a message naming the field when shapes disagree.
     pub fn check(&self) {
         let n = self.len();
-        assert_eq!(self.scales.len(), n, "Gaussians: scales.len() != means.len()");
+        assert_eq!(
+            self.scales.len(),
+            n,
+            "Gaussians: scales.len() != means.len()"
+        );
         assert_eq!(self.quats.len(), n, "Gaussians: quats.len() != means.len()");
         assert_eq!(
             self.opacity_logits.len(),

@@ -153,8 +153,8 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
         }
     }
     let [x, y, z] = p;
-    // 1. near plane (NaN fails the comparison and is culled too).
-    if !(z >= cam.near as f64) || !x.is_finite() || !y.is_finite() || !z.is_finite() {
+    // 1. near plane; a non-finite position is culled too.
+    if !x.is_finite() || !y.is_finite() || !z.is_finite() || z < cam.near as f64 {
         return None;
     }
 
@@ -220,7 +220,7 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
 
     // 4. conic.
     let det = sigma2[0][0] * sigma2[1][1] - s01 * s01;
-    if !(det > 0.0) || !det.is_finite() {
+    if !det.is_finite() || det <= 0.0 {
         return None;
     }
     let conic = [sigma2[1][1] / det, -s01 / det, sigma2[0][0] / det];
@@ -232,7 +232,7 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
     let mid = 0.5 * (sigma2[0][0] + sigma2[1][1]);
     let lambda_max = mid + (mid * mid - det).max(0.1).sqrt();
     let radius_f = (3.0 * lambda_max.sqrt()).ceil();
-    if !(radius_f >= 1.0) {
+    if radius_f.is_nan() || radius_f < 1.0 {
         return None;
     }
     let radius = radius_f as u32; // saturating
@@ -245,7 +245,11 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
 
     // 8. colour from SH, view direction detached.
     let centre = cam.centre();
-    let mut dir = [mean[0] - centre[0], mean[1] - centre[1], mean[2] - centre[2]];
+    let mut dir = [
+        mean[0] - centre[0],
+        mean[1] - centre[1],
+        mean[2] - centre[2],
+    ];
     let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
     if len > 0.0 {
         dir = dir.map(|d| d / len);
@@ -333,7 +337,11 @@ pub fn project_f64(cam: &Camera, g: &Gaussians64) -> Projected64 {
 /// Features are not a projection output: their gradient is `d.features` itself.
 pub fn project_bwd(cam: &Camera, g: &Gaussians, proj: &Projected, d: &BlendGrads) -> ProjectGrads {
     let g64 = Gaussians64::from_f32(g);
-    assert_eq!(proj.radius.len(), g64.len(), "project_bwd: proj is for another N");
+    assert_eq!(
+        proj.radius.len(),
+        g64.len(),
+        "project_bwd: proj is for another N"
+    );
     project_bwd_impl(cam, &g64, |i| proj.radius[i] == 0, d)
 }
 
@@ -486,8 +494,13 @@ fn project_bwd_impl(
         out.opacity_logits[i] = d.opacity[i] * sigmoid_grad(g.opacity_logits[i]);
 
         // colour = max(SH + 0.5, 0): zero gradient where clamped.
-        let dcol: [f64; 3] =
-            std::array::from_fn(|ch| if f.color_raw[ch] + 0.5 < 0.0 { 0.0 } else { d.color[i][ch] });
+        let dcol: [f64; 3] = std::array::from_fn(|ch| {
+            if f.color_raw[ch] + 0.5 < 0.0 {
+                0.0
+            } else {
+                d.color[i][ch]
+            }
+        });
         sh::eval_bwd(
             g.sh_degree,
             f.sh_dir,
