@@ -11,24 +11,10 @@
 
 mod raster_common;
 
-use dispflow_vk::kernels::raster::{Camera, Rasterizer, RenderOpts, G2D_STRIDE};
+use dispflow_vk::kernels::raster::{Rasterizer, RenderOpts, G2D_STRIDE};
 use dispflow_vk::reference::raster as twin;
 use dispflow_vk::testing;
 use raster_common::*;
-
-fn twin_camera(c: &Camera) -> twin::Camera {
-    twin::Camera {
-        rot: c.rot,
-        trans: c.trans,
-        fx: c.fx,
-        fy: c.fy,
-        cx: c.cx,
-        cy: c.cy,
-        width: c.width,
-        height: c.height,
-        near: c.near,
-    }
-}
 
 fn close_kind(what: &str, got: &[f32], want: &[f64]) {
     assert_eq!(got.len(), want.len(), "{what}: length");
@@ -36,14 +22,20 @@ fn close_kind(what: &str, got: &[f32], want: &[f64]) {
     let tol = 2e-3 * scale + 1e-7;
     for (i, (g, w)) in got.iter().zip(want).enumerate() {
         assert!(g.is_finite(), "{what}[{i}] = {g}");
-        assert!((*g as f64 - w).abs() <= tol, "{what}[{i}]: gpu {g}, twin {w} (tol {tol:.3e}, max |twin| {scale:.3e})");
+        assert!(
+            (*g as f64 - w).abs() <= tol,
+            "{what}[{i}]: gpu {g}, twin {w} (tol {tol:.3e}, max |twin| {scale:.3e})"
+        );
     }
 }
 
 fn close_abs(what: &str, got: &[f32], want: &[f32], abs: f32, rel: f32) {
     assert_eq!(got.len(), want.len(), "{what}: length");
     for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!((g - w).abs() <= abs + rel * w.abs(), "{what}[{i}]: gpu {g}, twin {w}");
+        assert!(
+            (g - w).abs() <= abs + rel * w.abs(),
+            "{what}[{i}]: gpu {g}, twin {w}"
+        );
     }
 }
 
@@ -52,7 +44,10 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
     let rast = Rasterizer::new(&gpu).unwrap();
     let scene = random_scene(seed, n, sh_degree, k);
     let cam = camera(w, h);
-    let opts = RenderOpts { background: [0.1, 0.2, 0.3], alpha_max: 0.99 };
+    let opts = RenderOpts {
+        background: [0.1, 0.2, 0.3],
+        alpha_max: 0.99,
+    };
     let up = Uploaded::new(&gpu, &scene);
     let (b, out) = render(&gpu, &rast, &cam, &up, &opts);
     let ctx = format!("seed {seed}, n {n}, {w}x{h}, sh {sh_degree}, k {k}");
@@ -66,9 +61,11 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
         sh_coeffs: scene.sh_coeffs,
         sh_degree,
     };
-    let tcam = twin_camera(&cam);
+    let tcam = cam;
     let proj = twin::project(&tcam, &g);
-    let splats: Vec<[f32; 4]> = gpu.read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64)).unwrap();
+    let splats: Vec<[f32; 4]> = gpu
+        .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
+        .unwrap();
     let mut visible = 0;
     for i in 0..n {
         let (a, c, col) = (splats[3 * i], splats[3 * i + 1], splats[3 * i + 2]);
@@ -78,46 +75,158 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
             continue;
         }
         visible += 1;
-        close_abs(&format!("{ctx}: mean2d {i}"), &a[..2], &proj.mean2d[i], 1e-3, 1e-6);
-        close_abs(&format!("{ctx}: depth {i}"), &a[2..3], &[proj.depth[i]], 0.0, 1e-6);
-        close_abs(&format!("{ctx}: opacity {i}"), &a[3..4], &[proj.opacity[i]], 1e-7, 1e-6);
-        close_abs(&format!("{ctx}: conic {i}"), &c[..3], &proj.conic[i], 1e-7, 1e-4);
-        close_abs(&format!("{ctx}: colour {i}"), &col[..3], &proj.color[i], 1e-6, 1e-5);
+        close_abs(
+            &format!("{ctx}: mean2d {i}"),
+            &a[..2],
+            &proj.mean2d[i],
+            1e-3,
+            1e-6,
+        );
+        close_abs(
+            &format!("{ctx}: depth {i}"),
+            &a[2..3],
+            &[proj.depth[i]],
+            0.0,
+            1e-6,
+        );
+        close_abs(
+            &format!("{ctx}: opacity {i}"),
+            &a[3..4],
+            &[proj.opacity[i]],
+            1e-7,
+            1e-6,
+        );
+        close_abs(
+            &format!("{ctx}: conic {i}"),
+            &c[..3],
+            &proj.conic[i],
+            1e-7,
+            1e-4,
+        );
+        close_abs(
+            &format!("{ctx}: colour {i}"),
+            &col[..3],
+            &proj.color[i],
+            1e-6,
+            1e-5,
+        );
     }
-    assert!(visible > n / 3, "{ctx}: only {visible} of {n} visible: the scene tests little");
+    assert!(
+        visible > n / 3,
+        "{ctx}: only {visible} of {n} visible: the scene tests little"
+    );
 
-    let bp = twin::BlendParams { width: w, height: h, alpha_max: opts.alpha_max, background: opts.background, feature_dims: k };
+    let bp = twin::BlendParams {
+        width: w,
+        height: h,
+        alpha_max: opts.alpha_max,
+        background: opts.background,
+        feature_dims: k,
+    };
     let fwd = twin::blend_fwd(&bp, &proj, &scene.features);
     let px = (w * h) as usize;
     let rgb: Vec<f32> = out.rgba.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
     let alpha: Vec<f32> = out.rgba.iter().map(|p| p[3]).collect();
-    close_abs(&format!("{ctx}: rgb"), &rgb, fwd.rgb.as_flattened(), 2e-5, 0.0);
+    close_abs(
+        &format!("{ctx}: rgb"),
+        &rgb,
+        fwd.rgb.as_flattened(),
+        2e-5,
+        0.0,
+    );
     close_abs(&format!("{ctx}: alpha"), &alpha, &fwd.alpha, 2e-5, 0.0);
     close_abs(&format!("{ctx}: depth"), &out.depth, &fwd.depth, 2e-5, 2e-5);
-    close_abs(&format!("{ctx}: final T"), &out.final_t, &fwd.final_t, 2e-5, 1e-4);
-    close_abs(&format!("{ctx}: features"), &out.features, &fwd.features, 2e-5, 2e-5);
-    let diff = out.n_contrib.iter().zip(&fwd.n_contrib).filter(|(a, b)| a != b).count();
-    assert_eq!(diff, 0, "{ctx}: {diff} pixels disagree on the last contributor");
+    close_abs(
+        &format!("{ctx}: final T"),
+        &out.final_t,
+        &fwd.final_t,
+        2e-5,
+        1e-4,
+    );
+    close_abs(
+        &format!("{ctx}: features"),
+        &out.features,
+        &fwd.features,
+        2e-5,
+        2e-5,
+    );
+    let diff = out
+        .n_contrib
+        .iter()
+        .zip(&fwd.n_contrib)
+        .filter(|(a, b)| a != b)
+        .count();
+    assert_eq!(
+        diff, 0,
+        "{ctx}: {diff} pixels disagree on the last contributor"
+    );
 
     let u = upstream(seed + 100, px, k as usize);
     let grads = backward(&gpu, &rast, &b, &cam, &up, &opts, &u);
-    let d_rgb: Vec<[f32; 3]> = (0..px).map(|p| [u.rgba[4 * p], u.rgba[4 * p + 1], u.rgba[4 * p + 2]]).collect();
+    let d_rgb: Vec<[f32; 3]> = (0..px)
+        .map(|p| [u.rgba[4 * p], u.rgba[4 * p + 1], u.rgba[4 * p + 2]])
+        .collect();
     let d_alpha: Vec<f32> = (0..px).map(|p| u.rgba[4 * p + 3]).collect();
-    let bg = twin::blend_bwd(&bp, &proj, &scene.features, &fwd, &d_rgb, &d_alpha, &u.depth, &u.features);
+    let bg = twin::blend_bwd(
+        &bp,
+        &proj,
+        &scene.features,
+        &fwd,
+        &d_rgb,
+        &d_alpha,
+        &u.depth,
+        &u.features,
+    );
     let s = G2D_STRIDE as usize;
-    let col = |lo: usize, hi: usize| -> Vec<f32> { (0..n).flat_map(|i| grads.grad2d[s * i + lo..s * i + hi].to_vec()).collect() };
-    close_kind(&format!("{ctx}: d mean2d"), &col(0, 2), bg.mean2d.as_flattened());
-    close_kind(&format!("{ctx}: d conic"), &col(2, 5), bg.conic.as_flattened());
+    let col = |lo: usize, hi: usize| -> Vec<f32> {
+        (0..n)
+            .flat_map(|i| grads.grad2d[s * i + lo..s * i + hi].to_vec())
+            .collect()
+    };
+    close_kind(
+        &format!("{ctx}: d mean2d"),
+        &col(0, 2),
+        bg.mean2d.as_flattened(),
+    );
+    close_kind(
+        &format!("{ctx}: d conic"),
+        &col(2, 5),
+        bg.conic.as_flattened(),
+    );
     close_kind(&format!("{ctx}: d opacity"), &col(5, 6), &bg.opacity);
-    close_kind(&format!("{ctx}: d colour"), &col(6, 9), bg.color.as_flattened());
+    close_kind(
+        &format!("{ctx}: d colour"),
+        &col(6, 9),
+        bg.color.as_flattened(),
+    );
     close_kind(&format!("{ctx}: d depth"), &col(9, 10), &bg.depth);
-    close_kind(&format!("{ctx}: d features"), &grads.d_features, &bg.features);
+    close_kind(
+        &format!("{ctx}: d features"),
+        &grads.d_features,
+        &bg.features,
+    );
 
     let pg = twin::project_bwd(&tcam, &g, &proj, &bg);
-    close_kind(&format!("{ctx}: d means"), &grads.d_means, pg.means.as_flattened());
-    close_kind(&format!("{ctx}: d scales"), &grads.d_scales, pg.scales.as_flattened());
-    close_kind(&format!("{ctx}: d quats"), &grads.d_quats, pg.quats.as_flattened());
-    close_kind(&format!("{ctx}: d logits"), &grads.d_logits, &pg.opacity_logits);
+    close_kind(
+        &format!("{ctx}: d means"),
+        &grads.d_means,
+        pg.means.as_flattened(),
+    );
+    close_kind(
+        &format!("{ctx}: d scales"),
+        &grads.d_scales,
+        pg.scales.as_flattened(),
+    );
+    close_kind(
+        &format!("{ctx}: d quats"),
+        &grads.d_quats,
+        pg.quats.as_flattened(),
+    );
+    close_kind(
+        &format!("{ctx}: d logits"),
+        &grads.d_logits,
+        &pg.opacity_logits,
+    );
     close_kind(&format!("{ctx}: d sh"), &grads.d_sh, &pg.sh);
 }
 

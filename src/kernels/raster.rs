@@ -43,8 +43,20 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// Tiles per row and per column, `ceil(W/16)`, `ceil(H/16)`.
     pub fn tiles(&self) -> (u32, u32) {
         (self.width.div_ceil(TILE), self.height.div_ceil(TILE))
+    }
+
+    /// Camera centre in world coordinates, `−rotᵀ · trans`.
+    pub fn centre(&self) -> [f64; 3] {
+        let mut c = [0.0; 3];
+        for (j, cj) in c.iter_mut().enumerate() {
+            for i in 0..3 {
+                *cj -= self.rot[i][j] as f64 * self.trans[i] as f64;
+            }
+        }
+        c
     }
 }
 

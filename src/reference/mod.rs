@@ -2,4 +2,6 @@
 //! They define what the kernels must compute; tests compare the two on identical inputs.
 
 pub mod radix_sort;
+pub mod raster;
 pub mod scan;
+pub mod sh;

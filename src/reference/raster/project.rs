@@ -1,0 +1,512 @@
+//! Twin of `glsl/raster/project.comp` and `glsl/raster/project_bwd.comp`: EWA projection of each
+//! Gaussian (gsplat "classic"), colour from SH, opacity, tile rectangle.
+
+use std::hash::{Hash, Hasher};
+
+use super::{
+    sigmoid, sigmoid_grad, BlendGrads, Camera, Gaussians, Gaussians64, ProjectGrads, Projected,
+    Projected64, DILATION, QUAT_EPS, TILE,
+};
+use crate::reference::sh;
+
+type M3 = [[f64; 3]; 3];
+
+fn mat3_mul(a: &M3, b: &M3) -> M3 {
+    let mut c = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            for k in 0..3 {
+                c[i][j] += a[i][k] * b[k][j];
+            }
+        }
+    }
+    c
+}
+
+fn transpose(a: &M3) -> M3 {
+    let mut t = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            t[i][j] = a[j][i];
+        }
+    }
+    t
+}
+
+/// Rotation matrix of a unit quaternion (w, x, y, z).
+fn quat_to_rot(q: [f64; 4]) -> M3 {
+    let [w, x, y, z] = q;
+    [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ]
+}
+
+/// `Σ_ij g_ij · ∂R_ij/∂q` for the unnormalised map of [`quat_to_rot`].
+fn quat_to_rot_vjp(q: [f64; 4], g: &M3) -> [f64; 4] {
+    let [w, x, y, z] = q;
+    let dw: M3 = [
+        [0.0, -2.0 * z, 2.0 * y],
+        [2.0 * z, 0.0, -2.0 * x],
+        [-2.0 * y, 2.0 * x, 0.0],
+    ];
+    let dx: M3 = [
+        [0.0, 2.0 * y, 2.0 * z],
+        [2.0 * y, -4.0 * x, -2.0 * w],
+        [2.0 * z, 2.0 * w, -4.0 * x],
+    ];
+    let dy: M3 = [
+        [-4.0 * y, 2.0 * x, 2.0 * w],
+        [2.0 * x, 0.0, 2.0 * z],
+        [-2.0 * w, 2.0 * z, -4.0 * y],
+    ];
+    let dz: M3 = [
+        [-4.0 * z, -2.0 * w, 2.0 * x],
+        [2.0 * w, -4.0 * z, 2.0 * y],
+        [2.0 * x, 2.0 * y, 0.0],
+    ];
+    let dot = |d: &M3| {
+        let mut s = 0.0;
+        for i in 0..3 {
+            for j in 0..3 {
+                s += d[i][j] * g[i][j];
+            }
+        }
+        s
+    };
+    [dot(&dw), dot(&dx), dot(&dy), dot(&dz)]
+}
+
+/// Everything the forward computes for one visible Gaussian; the backward reuses it.
+struct Fwd {
+    /// Camera-space mean.
+    p: [f64; 3],
+    /// Normalised quaternion and the norm it was divided by (0 when replaced by identity).
+    qn: [f64; 4],
+    qnorm: f64,
+    /// R(q̂), M = R·diag(s), Σ3 = M Mᵀ.
+    r: M3,
+    m: M3,
+    sigma3: M3,
+    /// The clamped x/z, y/z and whether the clamp was active.
+    txz: f64,
+    tyz: f64,
+    clamp_x: bool,
+    clamp_y: bool,
+    /// T = J · rot (2×3).
+    t: [[f64; 3]; 2],
+    conic: [f64; 3],
+    mean2d: [f64; 2],
+    radius: u32,
+    rect: [u32; 4],
+    /// SH value before +0.5 and clamp; colour after.
+    sh_dir: [f64; 3],
+    color_raw: [f64; 3],
+    color: [f64; 3],
+    opacity: f64,
+}
+
+fn cam_rot(cam: &Camera) -> M3 {
+    cam.rot.map(|r| r.map(f64::from))
+}
+
+/// Tile rectangle `[x0, y0, x1, y1)`, in f32 exactly as the GPU computes it.
+fn tile_rect(cam: &Camera, mean2d: [f64; 2], radius: u32) -> [u32; 4] {
+    let (tiles_x, tiles_y) = cam.tiles();
+    let r = radius as f32;
+    let t = TILE as f32;
+    // `as i32` saturates; `+ 1` must too.
+    let lo = |m: f32| ((m - r) / t).floor() as i32;
+    let hi = |m: f32| (((m + r) / t).floor() as i32).saturating_add(1);
+    let (mx, my) = (mean2d[0] as f32, mean2d[1] as f32);
+    let cl = |v: i32, n: u32| v.clamp(0, n as i32) as u32;
+    [
+        cl(lo(mx), tiles_x),
+        cl(lo(my), tiles_y),
+        cl(hi(mx), tiles_x),
+        cl(hi(my), tiles_y),
+    ]
+}
+
+/// Forward for Gaussian `i`; `None` when culled.
+fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
+    let rot = cam_rot(cam);
+    let mean = g.means[i];
+    let mut p = [0.0; 3];
+    for (a, pa) in p.iter_mut().enumerate() {
+        *pa = cam.trans[a] as f64;
+        for b in 0..3 {
+            *pa += rot[a][b] * mean[b];
+        }
+    }
+    let [x, y, z] = p;
+    // 1. near plane; a non-finite position is culled too.
+    if !x.is_finite() || !y.is_finite() || !z.is_finite() || z < cam.near as f64 {
+        return None;
+    }
+
+    // 2. Σ3 = R S Sᵀ Rᵀ.
+    let q = g.quats[i];
+    let qnorm = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+    let (qn, qnorm) = if qnorm < QUAT_EPS || !qnorm.is_finite() {
+        ([1.0, 0.0, 0.0, 0.0], 0.0)
+    } else {
+        (q.map(|v| v / qnorm), qnorm)
+    };
+    let r = quat_to_rot(qn);
+    let s = g.scales[i];
+    let mut m = [[0.0; 3]; 3];
+    for a in 0..3 {
+        for b in 0..3 {
+            m[a][b] = r[a][b] * s[b];
+        }
+    }
+    let sigma3 = mat3_mul(&m, &transpose(&m));
+
+    // 3. Jacobian with clamped x/z, y/z.
+    let (fx, fy, cx, cy) = (cam.fx as f64, cam.fy as f64, cam.cx as f64, cam.cy as f64);
+    let (w, h) = (cam.width as f64, cam.height as f64);
+    let tan_fovx = 0.5 * w / fx;
+    let tan_fovy = 0.5 * h / fy;
+    let lim_x_pos = (w - cx) / fx + 0.3 * tan_fovx;
+    let lim_x_neg = cx / fx + 0.3 * tan_fovx;
+    let lim_y_pos = (h - cy) / fy + 0.3 * tan_fovy;
+    let lim_y_neg = cy / fy + 0.3 * tan_fovy;
+    let (xz, yz) = (x / z, y / z);
+    let clamp_x = xz < -lim_x_neg || xz > lim_x_pos;
+    let clamp_y = yz < -lim_y_neg || yz > lim_y_pos;
+    let txz = xz.max(-lim_x_neg).min(lim_x_pos);
+    let tyz = yz.max(-lim_y_neg).min(lim_y_pos);
+    let (tx, ty) = (z * txz, z * tyz);
+    let j = [
+        [fx / z, 0.0, -fx * tx / (z * z)],
+        [0.0, fy / z, -fy * ty / (z * z)],
+    ];
+    let mut t = [[0.0; 3]; 2];
+    for a in 0..2 {
+        for b in 0..3 {
+            for k in 0..3 {
+                t[a][b] += j[a][k] * rot[k][b];
+            }
+        }
+    }
+    // Σ2 = T Σ3 Tᵀ + 0.3 I.
+    let mut sigma2 = [[0.0; 2]; 2];
+    for a in 0..2 {
+        for b in 0..2 {
+            for k in 0..3 {
+                for l in 0..3 {
+                    sigma2[a][b] += t[a][k] * sigma3[k][l] * t[b][l];
+                }
+            }
+        }
+    }
+    sigma2[0][0] += DILATION;
+    sigma2[1][1] += DILATION;
+    let s01 = 0.5 * (sigma2[0][1] + sigma2[1][0]);
+
+    // 4. conic.
+    let det = sigma2[0][0] * sigma2[1][1] - s01 * s01;
+    if !det.is_finite() || det <= 0.0 {
+        return None;
+    }
+    let conic = [sigma2[1][1] / det, -s01 / det, sigma2[0][0] / det];
+
+    // 5. mean2d.
+    let mean2d = [fx * x / z + cx, fy * y / z + cy];
+
+    // 6. radius.
+    let mid = 0.5 * (sigma2[0][0] + sigma2[1][1]);
+    let lambda_max = mid + (mid * mid - det).max(0.1).sqrt();
+    let radius_f = (3.0 * lambda_max.sqrt()).ceil();
+    if radius_f.is_nan() || radius_f < 1.0 {
+        return None;
+    }
+    let radius = radius_f as u32; // saturating
+
+    // 7. tile rectangle.
+    let rect = tile_rect(cam, mean2d, radius);
+    if rect[0] >= rect[2] || rect[1] >= rect[3] {
+        return None;
+    }
+
+    // 8. colour from SH, view direction detached.
+    let centre = cam.centre();
+    let mut dir = [
+        mean[0] - centre[0],
+        mean[1] - centre[1],
+        mean[2] - centre[2],
+    ];
+    let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+    if len > 0.0 {
+        dir = dir.map(|d| d / len);
+    }
+    let nc = g.sh_coeffs as usize;
+    let coeffs = &g.sh[i * nc * 3..(i + 1) * nc * 3];
+    let color_raw = sh::eval(g.sh_degree, dir, coeffs);
+    let color = color_raw.map(|c| (c + 0.5).max(0.0));
+
+    // 9. opacity.
+    let opacity = sigmoid(g.opacity_logits[i]);
+
+    Some(Fwd {
+        p,
+        qn,
+        qnorm,
+        r,
+        m,
+        sigma3,
+        txz,
+        tyz,
+        clamp_x,
+        clamp_y,
+        t,
+        conic,
+        mean2d,
+        radius,
+        rect,
+        sh_dir: dir,
+        color_raw,
+        color,
+        opacity,
+    })
+}
+
+/// Projects every Gaussian (see the module docs for the conventions), in f64, rounding the
+/// outputs to f32. The tile rectangle is computed in f32 from the rounded `mean2d` and `radius`
+/// like the GPU: `x0 = clamp(i32(floor((mx − r)/16)), 0, tiles_x)`,
+/// `x1 = clamp(i32(floor((mx + r)/16)) + 1, 0, tiles_x)`, same for y; an empty rectangle culls.
+///
+/// Culled (radius 0, empty rect, zero conic/colour/opacity): camera z < `near` or not finite,
+/// 2D determinant ≤ 0 or not finite, radius 0, no tile touched. A quaternion of norm < 1e-12 is
+/// replaced by the identity rotation (its gradient is then 0).
+pub fn project(cam: &Camera, g: &Gaussians) -> Projected {
+    project_f64(cam, &Gaussians64::from_f32(g)).to_f32()
+}
+
+/// [`project`] without rounding (the tile rectangle is still computed in f32 from the f32-rounded
+/// mean and radius, so it equals [`project`]'s).
+pub fn project_f64(cam: &Camera, g: &Gaussians64) -> Projected64 {
+    g.check();
+    let n = g.len();
+    let mut out = Projected64 {
+        mean2d: vec![[0.0; 2]; n],
+        conic: vec![[0.0; 3]; n],
+        depth: vec![0.0; n],
+        radius: vec![0; n],
+        tile_rect: vec![[0; 4]; n],
+        color: vec![[0.0; 3]; n],
+        opacity: vec![0.0; n],
+        signature: 0,
+    };
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    for i in 0..n {
+        let Some(f) = project_one(cam, g, i) else {
+            (i, false).hash(&mut hasher);
+            continue;
+        };
+        out.mean2d[i] = f.mean2d;
+        out.conic[i] = f.conic;
+        out.depth[i] = f.p[2];
+        out.radius[i] = f.radius;
+        out.tile_rect[i] = f.rect;
+        out.color[i] = f.color;
+        out.opacity[i] = f.opacity;
+        let col_clamped = f.color_raw.map(|c| c + 0.5 < 0.0);
+        (i, true, f.rect, f.clamp_x, f.clamp_y, col_clamped).hash(&mut hasher);
+    }
+    out.signature = hasher.finish();
+    out
+}
+
+/// Reverse of [`project`]: chains the blend gradients (mean2d, conic, opacity, colour, depth)
+/// back to the raw parameters. Gaussians culled in `proj` (radius 0) get zero gradients.
+/// Features are not a projection output: their gradient is `d.features` itself.
+pub fn project_bwd(cam: &Camera, g: &Gaussians, proj: &Projected, d: &BlendGrads) -> ProjectGrads {
+    let g64 = Gaussians64::from_f32(g);
+    assert_eq!(
+        proj.radius.len(),
+        g64.len(),
+        "project_bwd: proj is for another N"
+    );
+    project_bwd_impl(cam, &g64, |i| proj.radius[i] == 0, d)
+}
+
+/// [`project_bwd`] for the f64 pipeline (culling recomputed from `g`).
+pub fn project_bwd_f64(cam: &Camera, g: &Gaussians64, d: &BlendGrads) -> ProjectGrads {
+    project_bwd_impl(cam, g, |_| false, d)
+}
+
+fn project_bwd_impl(
+    cam: &Camera,
+    g: &Gaussians64,
+    culled: impl Fn(usize) -> bool,
+    d: &BlendGrads,
+) -> ProjectGrads {
+    g.check();
+    let n = g.len();
+    assert_eq!(d.mean2d.len(), n, "project_bwd: d.mean2d.len() != N");
+    assert_eq!(d.conic.len(), n, "project_bwd: d.conic.len() != N");
+    assert_eq!(d.opacity.len(), n, "project_bwd: d.opacity.len() != N");
+    assert_eq!(d.color.len(), n, "project_bwd: d.color.len() != N");
+    assert_eq!(d.depth.len(), n, "project_bwd: d.depth.len() != N");
+    let nc = g.sh_coeffs as usize;
+    let mut out = ProjectGrads {
+        means: vec![[0.0; 3]; n],
+        scales: vec![[0.0; 3]; n],
+        quats: vec![[0.0; 4]; n],
+        opacity_logits: vec![0.0; n],
+        sh: vec![0.0; g.sh.len()],
+    };
+    let rot = cam_rot(cam);
+    let (fx, fy) = (cam.fx as f64, cam.fy as f64);
+    for i in 0..n {
+        if culled(i) {
+            continue;
+        }
+        let Some(f) = project_one(cam, g, i) else {
+            continue;
+        };
+        let [x, y, z] = f.p;
+        let mut dp = [0.0; 3];
+
+        // Conic = Σ2⁻¹: dΣ2 = −C · dC · C with dC symmetric (b appears twice in the matrix).
+        let [a, b, c] = f.conic;
+        let con = [[a, b], [b, c]];
+        let [da, db, dc] = d.conic[i];
+        let dcon = [[da, 0.5 * db], [0.5 * db, dc]];
+        let mut dsigma2 = [[0.0; 2]; 2];
+        for r in 0..2 {
+            for s in 0..2 {
+                for k in 0..2 {
+                    for l in 0..2 {
+                        dsigma2[r][s] -= con[r][k] * dcon[k][l] * con[l][s];
+                    }
+                }
+            }
+        }
+        // Σ2 = T Σ3 Tᵀ (+ const): dT = 2 dΣ2 T Σ3, dΣ3 = Tᵀ dΣ2 T.
+        let t = &f.t;
+        let mut dt = [[0.0; 3]; 2];
+        for r in 0..2 {
+            for s in 0..3 {
+                for k in 0..2 {
+                    for l in 0..3 {
+                        dt[r][s] += 2.0 * dsigma2[r][k] * t[k][l] * f.sigma3[l][s];
+                    }
+                }
+            }
+        }
+        let mut dsigma3 = [[0.0; 3]; 3];
+        for r in 0..3 {
+            for s in 0..3 {
+                for k in 0..2 {
+                    for l in 0..2 {
+                        dsigma3[r][s] += t[k][r] * dsigma2[k][l] * t[l][s];
+                    }
+                }
+            }
+        }
+        // T = J · rot: dJ = dT · rotᵀ.
+        let mut dj = [[0.0; 3]; 2];
+        for r in 0..2 {
+            for s in 0..3 {
+                for k in 0..3 {
+                    dj[r][s] += dt[r][k] * rot[s][k];
+                }
+            }
+        }
+        // J = [[fx/z, 0, −fx·tx/z²], [0, fy/z, −fy·ty/z²]], tx = z·clamp(x/z), ty likewise.
+        let (tx, ty) = (z * f.txz, z * f.tyz);
+        let z2 = z * z;
+        let z3 = z2 * z;
+        dp[2] += dj[0][0] * (-fx / z2) + dj[1][1] * (-fy / z2);
+        dp[2] += dj[0][2] * (2.0 * fx * tx / z3) + dj[1][2] * (2.0 * fy * ty / z3);
+        let dtx = dj[0][2] * (-fx / z2);
+        let dty = dj[1][2] * (-fy / z2);
+        if f.clamp_x {
+            dp[2] += dtx * f.txz; // tx = z · limit
+        } else {
+            dp[0] += dtx; // tx = x
+        }
+        if f.clamp_y {
+            dp[2] += dty * f.tyz;
+        } else {
+            dp[1] += dty;
+        }
+
+        // mean2d = (fx x/z + cx, fy y/z + cy); depth = z.
+        let [du, dv] = d.mean2d[i];
+        dp[0] += du * fx / z;
+        dp[1] += dv * fy / z;
+        dp[2] += -du * fx * x / z2 - dv * fy * y / z2;
+        dp[2] += d.depth[i];
+
+        // p = rot · mean + trans.
+        let mut dmean = [0.0; 3];
+        for (bi, dm) in dmean.iter_mut().enumerate() {
+            for ai in 0..3 {
+                *dm += rot[ai][bi] * dp[ai];
+            }
+        }
+        out.means[i] = dmean;
+
+        // Σ3 = M Mᵀ: dM = 2 dΣ3 M;  M = R diag(s).
+        let mut dm = [[0.0; 3]; 3];
+        for r in 0..3 {
+            for s in 0..3 {
+                for k in 0..3 {
+                    dm[r][s] += 2.0 * dsigma3[r][k] * f.m[k][s];
+                }
+            }
+        }
+        let s = g.scales[i];
+        let mut dr = [[0.0; 3]; 3];
+        let mut ds = [0.0; 3];
+        for r in 0..3 {
+            for col in 0..3 {
+                dr[r][col] = dm[r][col] * s[col];
+                ds[col] += dm[r][col] * f.r[r][col];
+            }
+        }
+        out.scales[i] = ds;
+        // q̂ = q/|q|: dq = (dq̂ − q̂ (q̂·dq̂)) / |q|.
+        if f.qnorm > 0.0 {
+            let dqn = quat_to_rot_vjp(f.qn, &dr);
+            let dot: f64 = (0..4).map(|k| dqn[k] * f.qn[k]).sum();
+            out.quats[i] = std::array::from_fn(|k| (dqn[k] - f.qn[k] * dot) / f.qnorm);
+        }
+
+        // opacity = sigmoid(logit).
+        out.opacity_logits[i] = d.opacity[i] * sigmoid_grad(g.opacity_logits[i]);
+
+        // colour = max(SH + 0.5, 0): zero gradient where clamped.
+        let dcol: [f64; 3] = std::array::from_fn(|ch| {
+            if f.color_raw[ch] + 0.5 < 0.0 {
+                0.0
+            } else {
+                d.color[i][ch]
+            }
+        });
+        sh::eval_bwd(
+            g.sh_degree,
+            f.sh_dir,
+            dcol,
+            &mut out.sh[i * nc * 3..(i + 1) * nc * 3],
+        );
+    }
+    out
+}
