@@ -1,6 +1,7 @@
 //! One host wrapper per GLSL stage family: `#[repr(C)]` params mirrored in
 //! `glsl/include/params.glsl`, pipelines built once, `record()` taking explicit buffers.
 
+pub mod loss;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;
@@ -17,6 +18,17 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         };
     }
     vec![
+        layout!(
+            loss::LossParams,
+            width,
+            height,
+            planes,
+            pad0,
+            lambda_ssim,
+            inv_count,
+            pad1,
+            pad2
+        ),
         layout!(scan::ScanParams, capacity, level, num_levels, pad),
         layout!(radix_sort::SortParams, capacity, shift, digit_mask, pad),
         layout!(
