@@ -5,7 +5,7 @@
 use crate::error::{Error, Result};
 use crate::kernels::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use crate::kernels::raster::{
-    Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
+    split_sh, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
 };
 use crate::kernels::scan::{Count, PrefixSum, ScanScratch};
 use crate::reference;
@@ -186,7 +186,7 @@ pub struct RasterCase {
     rast: Rasterizer,
     bufs: RasterBuffers,
     cam: Camera,
-    inputs: [Buffer; 5],
+    inputs: [Buffer; 6],
     d_rgba: Buffer,
     d_depth: Buffer,
     pub n: u32,
@@ -228,7 +228,8 @@ impl RasterCase {
             gpu.buffer_from("bench scales", &scales)?,
             gpu.buffer_from("bench quats", &quats)?,
             gpu.buffer_from("bench logits", &logits)?,
-            gpu.buffer_from("bench sh", &sh)?,
+            gpu.buffer_from("bench sh dc", &split_sh(&sh, 16).0)?,
+            gpu.buffer_from("bench sh rest", &split_sh(&sh, 16).1)?,
         ];
         let px = (res * res) as usize;
         let d_rgba = gpu.buffer_from(
@@ -291,14 +292,15 @@ impl RasterCase {
     }
 }
 
-fn splat_inputs(inputs: &[Buffer; 5], n: u32) -> SplatInputs<'_> {
+fn splat_inputs(inputs: &[Buffer; 6], n: u32) -> SplatInputs<'_> {
     SplatInputs {
         n,
         means: inputs[0].all(),
         scales: inputs[1].all(),
         quats: inputs[2].all(),
         opacity_logits: inputs[3].all(),
-        sh: inputs[4].all(),
+        sh_dc: inputs[4].all(),
+        sh_rest: inputs[5].all(),
         sh_coeffs: 16,
         sh_degree: 3,
         features: None,

@@ -4,7 +4,8 @@
 use std::path::PathBuf;
 
 use dispflow_vk::kernels::raster::{
-    Camera, OutputGrads, RasterSize, Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
+    join_sh, split_sh, Camera, OutputGrads, RasterSize, Rasterizer, RenderOpts, SplatInputs,
+    G2D_STRIDE,
 };
 use dispflow_vk::testing;
 use dispflow_vk::vk::Recorder;
@@ -87,7 +88,9 @@ fn run(name: &str) {
     let sc = gpu.buffer_from("scales", &scales).unwrap();
     let quats = gpu.buffer_from("quats", c.get("quats")).unwrap();
     let op = gpu.buffer_from("opacities", c.get("opacities")).unwrap();
-    let sh = gpu.buffer_from("sh", c.get("coeffs")).unwrap();
+    let (dc, rest) = split_sh(c.get("coeffs"), 16);
+    let sh_dc = gpu.buffer_from("sh dc", &dc).unwrap();
+    let sh_rest = gpu.buffer_from("sh rest", &rest).unwrap();
     let cam = camera();
     let g = SplatInputs {
         n,
@@ -95,7 +98,8 @@ fn run(name: &str) {
         scales: sc.all(),
         quats: quats.all(),
         opacity_logits: op.all(),
-        sh: sh.all(),
+        sh_dc: sh_dc.all(),
+        sh_rest: sh_rest.all(),
         sh_coeffs: 16,
         sh_degree: 3,
         features: None,
@@ -203,7 +207,7 @@ fn run(name: &str) {
     );
     assert_close(
         "v_coeffs",
-        &rd(&b.d_sh, 48 * nn),
+        &join_sh(&rd(&b.d_sh_dc, 3 * nn), &rd(&b.d_sh_rest, 45 * nn), 16),
         c.get("v_coeffs"),
         abs,
         rel,

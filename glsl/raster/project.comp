@@ -14,10 +14,12 @@ layout(std430, binding = 0) readonly buffer Means { float means[]; };          /
 layout(std430, binding = 1) readonly buffer Scales { float scales[]; };        // [N,3] linear
 layout(std430, binding = 2) readonly buffer Quats { vec4 quats[]; };           // [N] (w,x,y,z)
 layout(std430, binding = 3) readonly buffer Opacity { float logits[]; };       // [N]
-layout(std430, binding = 4) readonly buffer Sh { float sh[]; };                // [N,K,3]
-layout(std430, binding = 5) writeonly buffer Splats { vec4 splats[]; };        // [N,3]
-layout(std430, binding = 6) writeonly buffer Rects { uvec4 rects[]; };         // [N]
-layout(std430, binding = 7) writeonly buffer Counts { uint counts[]; };        // [N] tiles touched
+// SH split in the DC band and the rest, so each can have its own learning rate:
+layout(std430, binding = 4) readonly buffer ShDc { float sh_dc[]; };           // [N,3]
+layout(std430, binding = 5) readonly buffer ShRest { float sh_rest[]; };       // [N,K-1,3]
+layout(std430, binding = 6) writeonly buffer Splats { vec4 splats[]; };        // [N,3]
+layout(std430, binding = 7) writeonly buffer Rects { uvec4 rects[]; };         // [N]
+layout(std430, binding = 8) writeonly buffer Counts { uint counts[]; };        // [N] tiles touched
 
 void main() {
     uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
@@ -40,11 +42,11 @@ void main() {
     dir = dl > 0.0 ? dir / dl : vec3(0.0, 0.0, 1.0);
     float b[16];
     sh_basis(dir, pc.sh_degree, b);
-    vec3 col = vec3(0.0);
+    vec3 col = b[0] * vec3(sh_dc[3 * i], sh_dc[3 * i + 1], sh_dc[3 * i + 2]);
     uint nb = min((pc.sh_degree + 1u) * (pc.sh_degree + 1u), pc.sh_coeffs);
-    for (uint k = 0; k < nb; ++k) {
-        uint o = (i * pc.sh_coeffs + k) * 3u;
-        col += b[k] * vec3(sh[o], sh[o + 1], sh[o + 2]);
+    for (uint k = 1; k < nb; ++k) {
+        uint o = (i * (pc.sh_coeffs - 1u) + k - 1u) * 3u;
+        col += b[k] * vec3(sh_rest[o], sh_rest[o + 1], sh_rest[o + 2]);
     }
     col = max(col + 0.5, vec3(0.0));
     splats[SPLAT_STRIDE * i] = vec4(r.mean2d, r.p.z, sigmoid(logits[i]));

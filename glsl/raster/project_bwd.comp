@@ -17,13 +17,29 @@ layout(std430, binding = 0) readonly buffer Means { float means[]; };
 layout(std430, binding = 1) readonly buffer Scales { float scales[]; };
 layout(std430, binding = 2) readonly buffer Quats { vec4 quats[]; };
 layout(std430, binding = 3) readonly buffer Opacity { float logits[]; };
-layout(std430, binding = 4) readonly buffer Sh { float sh[]; };
-layout(std430, binding = 5) readonly buffer Grad2d { float grad2d[]; };
-layout(std430, binding = 6) writeonly buffer DMeans { float d_means[]; };
-layout(std430, binding = 7) writeonly buffer DScales { float d_scales[]; };
-layout(std430, binding = 8) writeonly buffer DQuats { vec4 d_quats[]; };
-layout(std430, binding = 9) writeonly buffer DOpacity { float d_logits[]; };
-layout(std430, binding = 10) writeonly buffer DSh { float d_sh[]; };
+layout(std430, binding = 4) readonly buffer ShDc { float sh_dc[]; };
+layout(std430, binding = 5) readonly buffer ShRest { float sh_rest[]; };
+layout(std430, binding = 6) readonly buffer Grad2d { float grad2d[]; };
+layout(std430, binding = 7) writeonly buffer DMeans { float d_means[]; };
+layout(std430, binding = 8) writeonly buffer DScales { float d_scales[]; };
+layout(std430, binding = 9) writeonly buffer DQuats { vec4 d_quats[]; };
+layout(std430, binding = 10) writeonly buffer DOpacity { float d_logits[]; };
+layout(std430, binding = 11) writeonly buffer DShDc { float d_sh_dc[]; };
+layout(std430, binding = 12) writeonly buffer DShRest { float d_sh_rest[]; };
+
+// Coefficient k of Gaussian i: the DC band and the rest live in separate buffers.
+void write_dsh(uint i, uint k, vec3 v) {
+    if (k == 0u) {
+        d_sh_dc[3 * i] = v.x;
+        d_sh_dc[3 * i + 1] = v.y;
+        d_sh_dc[3 * i + 2] = v.z;
+    } else {
+        uint o = (i * (pc.sh_coeffs - 1u) + k - 1u) * 3u;
+        d_sh_rest[o] = v.x;
+        d_sh_rest[o + 1] = v.y;
+        d_sh_rest[o + 2] = v.z;
+    }
+}
 
 void write3(uint i, vec3 dm, vec3 ds) {
     d_means[3 * i] = dm.x;
@@ -44,7 +60,7 @@ void main() {
         write3(i, vec3(0.0), vec3(0.0));
         d_quats[i] = vec4(0.0);
         d_logits[i] = 0.0;
-        for (uint k = 0; k < 3u * pc.sh_coeffs; ++k) d_sh[i * 3u * pc.sh_coeffs + k] = 0.0;
+        for (uint k = 0; k < pc.sh_coeffs; ++k) write_dsh(i, k, vec3(0.0));
         return;
     }
     uint gb = i * G2D_STRIDE;
@@ -62,19 +78,13 @@ void main() {
     float b[16];
     sh_basis(dir, pc.sh_degree, b);
     uint nb = min((pc.sh_degree + 1u) * (pc.sh_degree + 1u), pc.sh_coeffs);
-    vec3 raw = vec3(0.5);
-    for (uint k = 0; k < nb; ++k) {
-        uint o = (i * pc.sh_coeffs + k) * 3u;
-        raw += b[k] * vec3(sh[o], sh[o + 1], sh[o + 2]);
+    vec3 raw = vec3(0.5) + b[0] * vec3(sh_dc[3 * i], sh_dc[3 * i + 1], sh_dc[3 * i + 2]);
+    for (uint k = 1; k < nb; ++k) {
+        uint o = (i * (pc.sh_coeffs - 1u) + k - 1u) * 3u;
+        raw += b[k] * vec3(sh_rest[o], sh_rest[o + 1], sh_rest[o + 2]);
     }
     vec3 g_raw = g_col * vec3(greaterThan(raw, vec3(0.0)));
-    for (uint k = 0; k < pc.sh_coeffs; ++k) {
-        uint o = (i * pc.sh_coeffs + k) * 3u;
-        vec3 v = k < nb ? b[k] * g_raw : vec3(0.0);
-        d_sh[o] = v.x;
-        d_sh[o + 1] = v.y;
-        d_sh[o + 2] = v.z;
-    }
+    for (uint k = 0; k < pc.sh_coeffs; ++k) write_dsh(i, k, k < nb ? b[k] * g_raw : vec3(0.0));
 
     float s = sigmoid(logits[i]);
     d_logits[i] = g_op * s * (1.0 - s);

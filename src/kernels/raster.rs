@@ -60,6 +60,31 @@ impl Camera {
     }
 }
 
+/// Splits SH coefficients stored as [N, K, 3] into the DC band [N, 3] and the rest
+/// [N, K − 1, 3], the layout the rasteriser reads.
+pub fn split_sh(sh: &[f32], coeffs: usize) -> (Vec<f32>, Vec<f32>) {
+    let (mut dc, mut rest) = (Vec::new(), Vec::new());
+    for g in sh.chunks_exact(3 * coeffs) {
+        dc.extend_from_slice(&g[..3]);
+        rest.extend_from_slice(&g[3..]);
+    }
+    (dc, rest)
+}
+
+/// Inverse of [`split_sh`].
+pub fn join_sh(dc: &[f32], rest: &[f32], coeffs: usize) -> Vec<f32> {
+    let r = 3 * (coeffs - 1);
+    dc.chunks_exact(3)
+        .enumerate()
+        .flat_map(|(i, d)| {
+            d.iter()
+                .chain(&rest[i * r..(i + 1) * r])
+                .copied()
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
 /// Mirrors `ProjectParams` in glsl/include/params.glsl (checked by tests/layout.rs).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -112,8 +137,10 @@ impl Default for RenderOpts {
 }
 
 /// The Gaussians to render, already deformed: `means` [N,3], `scales` [N,3] (linear),
-/// `quats` [N,4] (w, x, y, z; unnormalised), `opacity_logits` [N], `sh` [N, sh_coeffs, 3],
-/// and optionally `features` [N, feature_dims] blended with the same weights.
+/// `quats` [N,4] (w, x, y, z; unnormalised), `opacity_logits` [N], SH coefficients split in
+/// `sh_dc` [N,3] and `sh_rest` [N, sh_coeffs − 1, 3] (separate learning rates; `sh_rest` is
+/// not read when `sh_coeffs` is 1), and optionally `features` [N, feature_dims] blended with
+/// the same weights.
 #[derive(Clone, Copy, Debug)]
 pub struct SplatInputs<'a> {
     pub n: u32,
@@ -121,7 +148,8 @@ pub struct SplatInputs<'a> {
     pub scales: BufSlice<'a>,
     pub quats: BufSlice<'a>,
     pub opacity_logits: BufSlice<'a>,
-    pub sh: BufSlice<'a>,
+    pub sh_dc: BufSlice<'a>,
+    pub sh_rest: BufSlice<'a>,
     pub sh_coeffs: u32,
     pub sh_degree: u32,
     pub features: Option<BufSlice<'a>>,
@@ -183,7 +211,9 @@ pub struct RasterBuffers {
     pub d_scales: Buffer,
     pub d_quats: Buffer,
     pub d_opacity_logits: Buffer,
-    pub d_sh: Buffer,
+    pub d_sh_dc: Buffer,
+    /// [N, sh_coeffs − 1, 3]
+    pub d_sh_rest: Buffer,
 }
 
 impl RasterBuffers {
@@ -324,7 +354,11 @@ impl Rasterizer {
             d_scales: gpu.buffer("raster d scales", n * 3 * f)?,
             d_quats: gpu.buffer("raster d quats", n * 4 * f)?,
             d_opacity_logits: gpu.buffer("raster d opacity logits", n * f)?,
-            d_sh: gpu.buffer("raster d sh", n * sh_coeffs as u64 * 3 * f)?,
+            d_sh_dc: gpu.buffer("raster d sh dc", n * 3 * f)?,
+            d_sh_rest: gpu.buffer(
+                "raster d sh rest",
+                n * (sh_coeffs as u64 - 1).max(1) * 3 * f,
+            )?,
         })
     }
 
@@ -411,7 +445,8 @@ impl Rasterizer {
                 g.scales,
                 g.quats,
                 g.opacity_logits,
-                g.sh,
+                g.sh_dc,
+                g.sh_rest,
                 b.splats.all(),
                 b.rects.all(),
                 b.counts.all(),
@@ -526,13 +561,15 @@ impl Rasterizer {
                 g.scales,
                 g.quats,
                 g.opacity_logits,
-                g.sh,
+                g.sh_dc,
+                g.sh_rest,
                 b.grad2d.all(),
                 b.d_means.all(),
                 b.d_scales.all(),
                 b.d_quats.all(),
                 b.d_opacity_logits.all(),
-                b.d_sh.all(),
+                b.d_sh_dc.all(),
+                b.d_sh_rest.all(),
             ],
             grid(g.n),
         );

@@ -2,7 +2,8 @@
 #![allow(dead_code)]
 
 use dispflow_vk::kernels::raster::{
-    Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
+    join_sh, split_sh, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts,
+    SplatInputs,
 };
 use dispflow_vk::testing::{self, Noise, TestGpu};
 use dispflow_vk::vk::{Buffer, Recorder};
@@ -99,7 +100,8 @@ pub struct Uploaded {
     pub scales: Buffer,
     pub quats: Buffer,
     pub logits: Buffer,
-    pub sh: Buffer,
+    pub sh_dc: Buffer,
+    pub sh_rest: Buffer,
     pub features: Buffer,
     pub n: u32,
     pub sh_coeffs: u32,
@@ -121,7 +123,8 @@ impl Uploaded {
             scales: up("scales", s.scales.as_flattened()),
             quats: up("quats", s.quats.as_flattened()),
             logits: up("logits", &s.logits),
-            sh: up("sh", &s.sh),
+            sh_dc: up("sh dc", &split_sh(&s.sh, s.sh_coeffs as usize).0),
+            sh_rest: up("sh rest", &split_sh(&s.sh, s.sh_coeffs as usize).1),
             features: up("features", &s.features),
             n: s.len() as u32,
             sh_coeffs: s.sh_coeffs,
@@ -136,7 +139,8 @@ impl Uploaded {
             scales: self.scales.all(),
             quats: self.quats.all(),
             opacity_logits: self.logits.all(),
-            sh: self.sh.all(),
+            sh_dc: self.sh_dc.all(),
+            sh_rest: self.sh_rest.all(),
             sh_coeffs: self.sh_coeffs,
             sh_degree: self.sh_degree,
             features: (self.feature_dims > 0).then(|| self.features.all()),
@@ -234,7 +238,8 @@ pub fn backward(
         &b.d_scales,
         &b.d_quats,
         &b.d_opacity_logits,
-        &b.d_sh,
+        &b.d_sh_dc,
+        &b.d_sh_rest,
         &b.grad2d,
         &b.d_features,
     ] {
@@ -258,7 +263,11 @@ pub fn backward(
         d_scales: rd(&b.d_scales, 3),
         d_quats: rd(&b.d_quats, 4),
         d_logits: rd(&b.d_opacity_logits, 1),
-        d_sh: rd(&b.d_sh, up.sh_coeffs as u64 * 3),
+        d_sh: join_sh(
+            &rd(&b.d_sh_dc, 3),
+            &rd(&b.d_sh_rest, (up.sh_coeffs as u64 - 1) * 3),
+            up.sh_coeffs as usize,
+        ),
     }
 }
 
