@@ -1,0 +1,3 @@
+//! Model state: canonical Gaussians and the deformation network.
+
+pub mod gaussians;
