@@ -62,3 +62,11 @@ struct LossParams {
     uint pad1;
     uint pad2;
 };
+
+// src/kernels/deform.rs — canonical Gaussians + deformation → what the rasteriser draws.
+struct DeformParams {
+    uint n;
+    uint use_deform;  // 0 during warm-up (D ≡ 0): the MLP output is not read
+    uint pad0;
+    uint pad1;
+};

@@ -1,6 +1,7 @@
 //! One host wrapper per GLSL stage family: `#[repr(C)]` params mirrored in
 //! `glsl/include/params.glsl`, pipelines built once, `record()` taking explicit buffers.
 
+pub mod deform;
 pub mod loss;
 pub mod radix_sort;
 pub mod raster;
@@ -18,6 +19,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         };
     }
     vec![
+        layout!(deform::DeformParams, n, use_deform, pad0, pad1),
         layout!(
             loss::LossParams,
             width,

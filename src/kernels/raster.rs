@@ -246,7 +246,7 @@ fn sort_bits(cam: &Camera) -> u32 {
 }
 
 /// Workgroups for one invocation per element with 256-wide workgroups (2D past 32768).
-fn grid(n: u32) -> [u32; 3] {
+pub(crate) fn grid(n: u32) -> [u32; 3] {
     let groups = n.div_ceil(256);
     let gx = groups.clamp(1, 32768);
     [gx, groups.div_ceil(gx).max(1), 1]

@@ -23,8 +23,14 @@ pub enum Section {
 }
 
 impl Section {
-    pub const ALL: [Section; 6] =
-        [Section::Means, Section::LogScales, Section::Quats, Section::Opacity, Section::ShDc, Section::ShRest];
+    pub const ALL: [Section; 6] = [
+        Section::Means,
+        Section::LogScales,
+        Section::Quats,
+        Section::Opacity,
+        Section::ShDc,
+        Section::ShRest,
+    ];
 }
 
 /// Where each section lives in a buffer of `capacity` Gaussians. Sections start on 64-float
@@ -38,7 +44,10 @@ pub struct GaussianLayout {
 
 impl GaussianLayout {
     pub fn new(capacity: u32, sh_degree: u32) -> Self {
-        GaussianLayout { capacity, sh_coeffs: (sh_degree + 1).pow(2) }
+        GaussianLayout {
+            capacity,
+            sh_coeffs: (sh_degree + 1).pow(2),
+        }
     }
 
     /// Floats per Gaussian in `s`.
@@ -115,9 +124,16 @@ impl HostGaussians {
     /// 3DGS initialisation from points: isotropic log-scale from the mean squared distance to
     /// the 3 nearest neighbours (grid-accelerated), identity rotation, opacity 0.1, DC colour
     /// from the point colour (grey when none), higher bands zero.
-    pub fn from_points(points: &[[f32; 3]], colors: Option<&[[f32; 3]]>, sh_degree: u32) -> Result<Self> {
+    pub fn from_points(
+        points: &[[f32; 3]],
+        colors: Option<&[[f32; 3]]>,
+        sh_degree: u32,
+    ) -> Result<Self> {
         if let Some(i) = points.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
-            return Err(Error::Invalid(format!("initial point {i} is not finite: {:?}", points[i])));
+            return Err(Error::Invalid(format!(
+                "initial point {i} is not finite: {:?}",
+                points[i]
+            )));
         }
         let sh_coeffs = (sh_degree + 1).pow(2);
         let d2 = knn3_mean_sq_dist(points);
@@ -128,7 +144,9 @@ impl HostGaussians {
             log_scales: d2.iter().map(|&d| [0.5 * d.max(1e-7).ln(); 3]).collect(),
             quats: vec![[1.0, 0.0, 0.0, 0.0]; n],
             opacity: vec![inverse_sigmoid(0.1); n],
-            sh_dc: (0..n).map(|i| colors.map_or([0.0; 3], |c| c[i].map(rgb_to_sh_dc))).collect(),
+            sh_dc: (0..n)
+                .map(|i| colors.map_or([0.0; 3], |c| c[i].map(rgb_to_sh_dc)))
+                .collect(),
             sh_rest: vec![0.0; n * 3 * (sh_coeffs as usize - 1)],
         })
     }
@@ -160,7 +178,10 @@ impl HostGaussians {
     /// Reads rows 0..n of `buf`.
     pub fn download(gpu: &Gpu, layout: &GaussianLayout, buf: &Buffer, n: u32) -> Result<Self> {
         if n == 0 {
-            return Ok(HostGaussians { sh_coeffs: layout.sh_coeffs, ..Default::default() });
+            return Ok(HostGaussians {
+                sh_coeffs: layout.sh_coeffs,
+                ..Default::default()
+            });
         }
         Ok(HostGaussians {
             sh_coeffs: layout.sh_coeffs,
@@ -169,7 +190,11 @@ impl HostGaussians {
             quats: gpu.read(layout.slice(buf, Section::Quats, n))?,
             opacity: gpu.read(layout.slice(buf, Section::Opacity, n))?,
             sh_dc: gpu.read(layout.slice(buf, Section::ShDc, n))?,
-            sh_rest: if layout.sh_coeffs > 1 { gpu.read(layout.slice(buf, Section::ShRest, n))? } else { Vec::new() },
+            sh_rest: if layout.sh_coeffs > 1 {
+                gpu.read(layout.slice(buf, Section::ShRest, n))?
+            } else {
+                Vec::new()
+            },
         })
     }
 }
@@ -193,11 +218,15 @@ pub fn knn3_mean_sq_dist(p: &[[f32; 3]]) -> Vec<f32> {
     let extent: Vec<f32> = (0..3).map(|a| (hi[a] - lo[a]).max(1e-6)).collect();
     let vol: f32 = extent.iter().product();
     let cell = (vol / (n as f32 / 2.0)).cbrt().max(1e-6);
-    let dims: Vec<i64> = extent.iter().map(|e| ((e / cell).ceil() as i64).clamp(1, 1024)).collect();
+    let dims: Vec<i64> = extent
+        .iter()
+        .map(|e| ((e / cell).ceil() as i64).clamp(1, 1024))
+        .collect();
     let key = |q: &[f32; 3]| -> [i64; 3] {
         [0, 1, 2].map(|a| (((q[a] - lo[a]) / cell) as i64).clamp(0, dims[a] - 1))
     };
-    let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> = std::collections::HashMap::new();
+    let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> =
+        std::collections::HashMap::new();
     for (i, q) in p.iter().enumerate() {
         grid.entry(key(q)).or_default().push(i);
     }
