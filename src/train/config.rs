@@ -1,0 +1,238 @@
+//! Training configuration: everything a run needs to be reproduced, written as `config.toml`.
+//! Defaults follow Deformable-3DGS (and 3DGS for the Gaussian recipe) at the paper's
+//! 20 000-iteration setting; `fast` shrinks it to finish on a CPU (lavapipe) in minutes.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Learning rates (Deformable-3DGS defaults; position rates are scaled by the scene extent).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LearningRates {
+    pub position_init: f64,
+    pub position_final: f64,
+    pub position_delay_mult: f64,
+    pub feature: f64,
+    /// SH bands above 0 learn `feature / feature_rest_div`.
+    pub feature_rest_div: f64,
+    pub opacity: f64,
+    pub scaling: f64,
+    pub rotation: f64,
+    /// Deformation MLP: `deform_init → deform_final`, exponential over the run.
+    pub deform_init: f64,
+    pub deform_final: f64,
+}
+
+impl Default for LearningRates {
+    fn default() -> Self {
+        LearningRates {
+            position_init: 0.00016,
+            position_final: 0.0000016,
+            position_delay_mult: 0.01,
+            feature: 0.0025,
+            feature_rest_div: 20.0,
+            opacity: 0.05,
+            scaling: 0.001,
+            rotation: 0.001,
+            deform_init: 0.00016 * 5.0,
+            deform_final: 0.0000016,
+        }
+    }
+}
+
+/// Adaptive density control (3DGS).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DensifyConfig {
+    pub from: u32,
+    pub until: u32,
+    pub interval: u32,
+    pub grad_threshold: f32,
+    pub percent_dense: f32,
+    pub min_opacity: f32,
+    /// Screen-size prune (pixels), active after the first opacity reset.
+    pub max_screen_size: f32,
+    pub opacity_reset_interval: u32,
+    /// Most Gaussians the run may hold (buffers are allocated for this many).
+    pub budget: u32,
+}
+
+impl Default for DensifyConfig {
+    fn default() -> Self {
+        DensifyConfig {
+            from: 500,
+            until: 15_000,
+            interval: 100,
+            grad_threshold: 0.0002,
+            percent_dense: 0.01,
+            min_opacity: 0.005,
+            max_screen_size: 20.0,
+            opacity_reset_interval: 3000,
+            budget: 500_000,
+        }
+    }
+}
+
+/// How the image background is chosen for rendering and compositing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Background {
+    Black,
+    White,
+    /// A random colour per step (training only; evaluation uses black).
+    Random,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainConfig {
+    pub iterations: u32,
+    pub seed: u64,
+    /// Highest SH degree (grown by one every `sh_interval` iterations).
+    pub sh_degree: u32,
+    pub sh_interval: u32,
+    /// Largest image side after loading (box-downscaled), `None` = as stored.
+    pub max_resolution: Option<u32>,
+    pub mlp_width: u32,
+    pub mlp_depth: u32,
+    /// Iterations with D ≡ 0 before the deformation network is trained.
+    pub warm_up: u32,
+    pub lambda_ssim: f32,
+    pub background: Background,
+    /// Time noise (AST) of Deformable-3DGS; `None` = on for real captures, off for synthetic.
+    pub time_noise: Option<bool>,
+    pub lr: LearningRates,
+    pub densify: DensifyConfig,
+    pub log_interval: u32,
+    pub checkpoint_interval: u32,
+    /// Motion (displacement-flow) loss weight α; 0 = the Deformable-3DGS baseline.
+    pub motion_weight: f32,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        TrainConfig::paper()
+    }
+}
+
+/// Named starting points for the configuration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// The paper's setting: 20 000 iterations, 8×256 MLP, warm-up 3000, densify 500–15 000.
+    Paper,
+    /// Minutes on a CPU: 1500 iterations, 4×64 MLP, warm-up 300, densify 100–1000, SH degree 1.
+    Fast,
+}
+
+impl TrainConfig {
+    pub fn paper() -> Self {
+        TrainConfig {
+            iterations: 20_000,
+            seed: 0,
+            sh_degree: 3,
+            sh_interval: 1000,
+            max_resolution: None,
+            mlp_width: 256,
+            mlp_depth: 8,
+            warm_up: 3000,
+            lambda_ssim: 0.2,
+            background: Background::Black,
+            time_noise: None,
+            lr: LearningRates::default(),
+            densify: DensifyConfig::default(),
+            log_interval: 100,
+            checkpoint_interval: 2000,
+            motion_weight: 0.0,
+        }
+    }
+
+    pub fn fast() -> Self {
+        TrainConfig {
+            iterations: 1500,
+            sh_degree: 1,
+            sh_interval: 500,
+            max_resolution: Some(160),
+            mlp_width: 64,
+            mlp_depth: 4,
+            warm_up: 300,
+            densify: DensifyConfig {
+                from: 100,
+                until: 1000,
+                interval: 100,
+                opacity_reset_interval: 600,
+                budget: 30_000,
+                ..DensifyConfig::default()
+            },
+            log_interval: 50,
+            checkpoint_interval: 500,
+            ..TrainConfig::paper()
+        }
+    }
+
+    pub fn preset(p: Preset) -> Self {
+        match p {
+            Preset::Paper => TrainConfig::paper(),
+            Preset::Fast => TrainConfig::fast(),
+        }
+    }
+
+    /// Reads a TOML file (every field optional over `base`).
+    pub fn from_toml_over(base: &TrainConfig, path: &std::path::Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.display().to_string(), source })?;
+        let mut merged = toml::Value::try_from(base).expect("config serialises");
+        let user: toml::Value = toml::from_str(&text).map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+        merge(&mut merged, user);
+        let cfg: TrainConfig = merged.try_into().map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).expect("config serialises")
+    }
+
+    /// Rejects settings that cannot run, naming the field.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |f: &str, why: &str| Err(Error::Invalid(format!("config field {f}: {why}")));
+        if self.iterations == 0 {
+            return bad("iterations", "must be at least 1");
+        }
+        if self.sh_degree > 3 {
+            return bad("sh_degree", "expected 0..=3");
+        }
+        if self.mlp_width == 0 || self.mlp_depth == 0 {
+            return bad("mlp_width/mlp_depth", "must be at least 1");
+        }
+        if !(0.0..=1.0).contains(&self.lambda_ssim) {
+            return bad("lambda_ssim", "expected a value in [0, 1]");
+        }
+        if self.densify.budget == 0 {
+            return bad("densify.budget", "must be at least 1");
+        }
+        if self.sh_interval == 0 || self.densify.interval == 0 || self.log_interval == 0 {
+            return bad("sh_interval/densify.interval/log_interval", "must be at least 1");
+        }
+        if !self.motion_weight.is_finite() || self.motion_weight < 0.0 {
+            return bad("motion_weight", "expected a finite value >= 0");
+        }
+        Ok(())
+    }
+}
+
+fn merge(base: &mut toml::Value, over: toml::Value) {
+    match (base, over) {
+        (toml::Value::Table(b), toml::Value::Table(o)) => {
+            for (k, v) in o {
+                match b.get_mut(&k) {
+                    Some(bv) => merge(bv, v),
+                    None => {
+                        b.insert(k, v);
+                    }
+                }
+            }
+        }
+        (b, o) => *b = o,
+    }
+}
