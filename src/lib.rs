@@ -12,6 +12,7 @@ pub mod bench;
 pub mod data;
 pub mod error;
 pub mod kernels;
+pub mod model;
 pub mod reference;
 pub mod shaders;
 pub mod testing;
