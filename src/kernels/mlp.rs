@@ -315,23 +315,7 @@ impl Mlp {
                    bb: Option<(BufSlice<'_>, u32)>,
                    o: (BufSlice<'_>, u32, u32),
                    relu: bool| {
-            let pc = MlpLinearParams {
-                n,
-                fan_in: l.fan_in as u32,
-                fan_out: l.fan_out as u32,
-                ka: a.1,
-                a_stride: a.2,
-                b_stride: bb.map_or(0, |x| x.1),
-                out_stride: o.1,
-                out_col: o.2,
-                w_off: l.w_off as u32,
-                b_off: l.b_off as u32,
-                relu: relu as u32,
-                pad: 0,
-            };
-            let binb = bb.map_or(a.0, |x| x.0);
-            let grid = row_grid(n, (l.fan_out as u32).div_ceil(TILE));
-            rec.dispatch(&self.fwd, &pc, &[params, a.0, binb, o.0], grid);
+            self.linear(rec, n, l, params, a, bb, o, relu);
         };
         if cfg.time_net() {
             let tn = self.layout.time_net();
@@ -378,6 +362,45 @@ impl Mlp {
             false,
         );
         rec.set_zone("");
+    }
+
+    /// One Linear over `n` rows: `out[r][out_col + o] = act(b[o] + Σ_k W[o][k] · in[r][k])`
+    /// with `in = [a[r][0..ka] | bb[r][..]]`; `a` = (slice, ka, row stride), `bb` = (slice, row
+    /// stride), `out` = (slice, row stride, first column). Weights and bias at `l`'s offsets in
+    /// `params`. The building block of [`Mlp::forward`], public for the GEMM microbenchmark.
+    #[allow(clippy::too_many_arguments)]
+    pub fn linear(
+        &self,
+        rec: &mut Recorder<'_>,
+        n: u32,
+        l: &LinearSpec,
+        params: BufSlice<'_>,
+        a: (BufSlice<'_>, u32, u32),
+        bb: Option<(BufSlice<'_>, u32)>,
+        out: (BufSlice<'_>, u32, u32),
+        relu: bool,
+    ) {
+        assert!(
+            a.1 as usize == l.fan_in || bb.is_some(),
+            "linear: input narrower than fan_in"
+        );
+        let pc = MlpLinearParams {
+            n,
+            fan_in: l.fan_in as u32,
+            fan_out: l.fan_out as u32,
+            ka: a.1,
+            a_stride: a.2,
+            b_stride: bb.map_or(0, |x| x.1),
+            out_stride: out.1,
+            out_col: out.2,
+            w_off: l.w_off as u32,
+            b_off: l.b_off as u32,
+            relu: relu as u32,
+            pad: 0,
+        };
+        let binb = bb.map_or(a.0, |x| x.0);
+        let grid = row_grid(n, (l.fan_out as u32).div_ceil(TILE));
+        rec.dispatch(&self.fwd, &pc, &[params, a.0, binb, out.0], grid);
     }
 
     /// Gradients of every weight and bias for `d_out` [N][10] (gradients of dx, dr, ds), from
