@@ -19,6 +19,123 @@ struct SortParams {
     uint pad;
 };
 
+
+// src/kernels/mlp.rs: positional encoding of x (and t) into the trunk input rows.
+struct MlpEncodeParams {
+    uint n;          // Gaussians
+    uint x_freqs;    // L of γ(x)
+    uint t_freqs;    // L of γ(t)
+    uint x0_stride;  // floats per row of x0 (in_dims)
+    uint t_to_x0;    // 1: γ(t) goes to x0 after γ(x) (Direct); 0: to enc_t (time net)
+    uint t_stride;   // floats per row of enc_t
+    uint per_gaussian_time; // 1: t = times[i]; 0: t = time
+    float time;
+};
+
+// src/kernels/mlp.rs: out[r][out_col + o] = act(b[o] + Σ_k W[o][k] · in[r][k]), in = [A | B].
+struct MlpLinearParams {
+    uint n;          // rows (Gaussians)
+    uint fan_in;     // K (= ka + columns from B)
+    uint fan_out;
+    uint ka;         // input columns read from A; the rest from B
+    uint a_stride;
+    uint b_stride;
+    uint out_stride;
+    uint out_col;
+    uint w_off;      // floats into the parameter buffer
+    uint b_off;
+    uint relu;       // 1: ReLU epilogue
+    uint pad;
+};
+
+// src/kernels/mlp.rs: d_in[r][out_col + c] (+)= mask · Σ_o dz[r][o] · W[o][col0 + c], c < cols.
+struct MlpBwdDataParams {
+    uint n;
+    uint fan_in;     // weight row length
+    uint fan_out;    // K (columns of dz)
+    uint cols;       // input columns produced
+    uint col0;       // first weight column
+    uint dz_stride;
+    uint out_stride;
+    uint out_col;
+    uint mask_stride;// 0: no ReLU mask; else mask = act[r][mask_col + c] > 0
+    uint mask_col;
+    uint w_off;
+    uint accumulate; // 1: add into d_in
+};
+
+// src/kernels/mlp.rs: partial[s][o][c] = Σ_{r in chunk s} dz[r][o] · [A | B | 1][r][c].
+struct MlpBwdWeightParams {
+    uint n;
+    uint fan_in;
+    uint fan_out;
+    uint ka;
+    uint a_stride;
+    uint b_stride;
+    uint dz_stride;
+    uint chunk_rows; // rows per partial (multiple of 16)
+};
+
+// src/kernels/mlp.rs: grad[W, b] (+)= Σ_s partial[s].
+struct MlpReduceParams {
+    uint count;      // fan_out · (fan_in + 1)
+    uint chunks;
+    uint fan_in;
+    uint w_off;
+    uint b_off;
+    uint accumulate;
+    uint pad0;
+    uint pad1;
+};
+
+// src/kernels/mlp_fused.rs: whole network per block of rows, activations in shared memory.
+struct MlpFusedParams {
+    uint n;
+    uint depth;
+    uint width;
+    uint skip;       // layer after whose ReLU the input is concatenated; 0xffffffff: none
+    uint x_freqs;
+    uint t_freqs;
+    uint time_net;   // 1: γ(t) → time net → t_feat; 0: t_feat = γ(t)
+    uint hidden;     // time-net hidden width
+    uint t_feat;     // time-feature dims
+    uint per_gaussian_time;
+    float time;
+    uint pad;
+};
+
+// src/kernels/mlp_fused.rs: f32 → f16 copy of the parameters.
+struct MlpConvertParams {
+    uint count;
+    uint pad0;
+    uint pad1;
+    uint pad2;
+};
+
+// src/kernels/mlp_fused.rs: FMA-throughput probe (register-only FMA chains).
+struct FmaPeakParams {
+    uint iters;
+    float a;
+    float b;
+    uint pad;
+};
+
+// src/kernels/adam.rs: one Adam step on floats [first, first + count) of one buffer.
+struct AdamParams {
+    uint first;
+    uint count;
+    uint row_len;    // floats per mask row (mask index = (i − first) / row_len)
+    uint use_mask;   // 1: skip rows whose mask word is 0
+    float lr;
+    float beta1;
+    float beta2;
+    float eps;
+    float bc1;       // 1 − β1^t
+    float bc2;       // 1 − β2^t
+    uint pad0;
+    uint pad1;
+};
+
 #endif
 
 // src/kernels/raster.rs — camera and image shared by project, bin and project_bwd.

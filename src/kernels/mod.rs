@@ -1,8 +1,11 @@
 //! One host wrapper per GLSL stage family: `#[repr(C)]` params mirrored in
 //! `glsl/include/params.glsl`, pipelines built once, `record()` taking explicit buffers.
 
+pub mod adam;
 pub mod deform;
 pub mod loss;
+pub mod mlp;
+pub mod mlp_fused;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;
@@ -58,6 +61,101 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             tiles_y,
             alpha_max,
             num_gaussians,
+            pad0,
+            pad1
+        ),
+        layout!(
+            mlp::MlpEncodeParams,
+            n,
+            x_freqs,
+            t_freqs,
+            x0_stride,
+            t_to_x0,
+            t_stride,
+            per_gaussian_time,
+            time
+        ),
+        layout!(
+            mlp::MlpLinearParams,
+            n,
+            fan_in,
+            fan_out,
+            ka,
+            a_stride,
+            b_stride,
+            out_stride,
+            out_col,
+            w_off,
+            b_off,
+            relu,
+            pad
+        ),
+        layout!(
+            mlp::MlpBwdDataParams,
+            n,
+            fan_in,
+            fan_out,
+            cols,
+            col0,
+            dz_stride,
+            out_stride,
+            out_col,
+            mask_stride,
+            mask_col,
+            w_off,
+            accumulate
+        ),
+        layout!(
+            mlp::MlpBwdWeightParams,
+            n,
+            fan_in,
+            fan_out,
+            ka,
+            a_stride,
+            b_stride,
+            dz_stride,
+            chunk_rows
+        ),
+        layout!(
+            mlp::MlpReduceParams,
+            count,
+            chunks,
+            fan_in,
+            w_off,
+            b_off,
+            accumulate,
+            pad0,
+            pad1
+        ),
+        layout!(
+            mlp_fused::MlpFusedParams,
+            n,
+            depth,
+            width,
+            skip,
+            x_freqs,
+            t_freqs,
+            time_net,
+            hidden,
+            t_feat,
+            per_gaussian_time,
+            time,
+            pad
+        ),
+        layout!(mlp_fused::MlpConvertParams, count, pad0, pad1, pad2),
+        layout!(mlp_fused::FmaPeakParams, iters, a, b, pad),
+        layout!(
+            adam::AdamParams,
+            first,
+            count,
+            row_len,
+            use_mask,
+            lr,
+            beta1,
+            beta2,
+            eps,
+            bc1,
+            bc2,
             pad0,
             pad1
         ),

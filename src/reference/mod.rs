@@ -1,8 +1,10 @@
 //! CPU twins of the GPU stages: same names, same inputs in binding order, plain loops.
 //! They define what the kernels must compute; tests compare the two on identical inputs.
 
+pub mod adam;
 pub mod deform;
 pub mod loss;
+pub mod mlp;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;

@@ -1,0 +1,29 @@
+#version 460
+// Fused Adam (PyTorch semantics, bias-corrected) on floats [first, first + count) of one
+// buffer: one dispatch per parameter group. With use_mask, rows of row_len floats whose mask
+// word is 0 are skipped entirely (p, m, v unchanged).
+#extension GL_GOOGLE_include_directive : require
+#include "common.glsl"
+#include "params.glsl"
+
+layout(local_size_x = 256) in;
+
+layout(push_constant) uniform Push { AdamParams pc; };
+layout(std430, binding = 0) buffer P { float p[]; };
+layout(std430, binding = 1) readonly buffer G { float g[]; };
+layout(std430, binding = 2) buffer M { float m[]; };
+layout(std430, binding = 3) buffer V { float v[]; };
+layout(std430, binding = 4) readonly buffer Mask { uint mask[]; };
+
+void main() {
+    uint j = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    if (j >= pc.count) return;
+    if (pc.use_mask != 0 && mask[j / pc.row_len] == 0u) return;
+    uint i = pc.first + j;
+    float gi = g[i];
+    float mi = pc.beta1 * m[i] + (1.0 - pc.beta1) * gi;
+    float vi = pc.beta2 * v[i] + (1.0 - pc.beta2) * gi * gi;
+    m[i] = mi;
+    v[i] = vi;
+    p[i] -= pc.lr * (mi / pc.bc1) / (sqrt(vi / pc.bc2) + pc.eps);
+}

@@ -1,0 +1,106 @@
+//! Fused Adam (`glsl/optim/adam.comp`), one dispatch per parameter group. CPU twin:
+//! `reference::adam`. Works on any f32 buffer (MLP weights, Gaussian parameters): a group is a
+//! float range of one buffer with its own learning rate (from `model::optim::ExpLr` on the host)
+//! and an optional visibility mask.
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::error::Result;
+use crate::model::optim::AdamHyper;
+use crate::shaders;
+use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
+
+/// Mirrors `AdamParams` in glsl/include/params.glsl (checked by tests/layout.rs).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct AdamParams {
+    pub first: u32,
+    pub count: u32,
+    pub row_len: u32,
+    pub use_mask: u32,
+    pub lr: f32,
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+    pub bc1: f32,
+    pub bc2: f32,
+    pub pad0: u32,
+    pub pad1: u32,
+}
+
+/// The four buffers Adam updates or reads, all bound whole and indexed by the group's range:
+/// parameters, gradients, first and second moments (same length, f32).
+#[derive(Clone, Copy, Debug)]
+pub struct AdamBuffers<'a> {
+    pub params: BufSlice<'a>,
+    pub grads: BufSlice<'a>,
+    pub m: BufSlice<'a>,
+    pub v: BufSlice<'a>,
+}
+
+/// One parameter group: floats `first .. first + count`, learning rate, optional mask
+/// (one u32 per row of `row_len` floats counted from `first`; 0 = skip the row).
+#[derive(Clone, Copy, Debug)]
+pub struct AdamGroup<'a> {
+    pub first: u32,
+    pub count: u32,
+    pub lr: f32,
+    pub mask: Option<(BufSlice<'a>, u32)>,
+}
+
+pub struct Adam {
+    pipe: ComputePipeline,
+}
+
+impl Adam {
+    pub fn new(gpu: &Gpu) -> Result<Self> {
+        Ok(Adam {
+            pipe: gpu.pipeline(&shaders::optim::ADAM)?,
+        })
+    }
+
+    /// Records one Adam step (1-based `step`) for each group, one dispatch each.
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: AdamBuffers<'_>,
+        groups: &[AdamGroup<'_>],
+        h: &AdamHyper,
+        step: u32,
+    ) {
+        let (bc1, bc2) = h.bias_corrections(step);
+        rec.set_zone("adam");
+        for g in groups {
+            let end = (g.first as u64 + g.count as u64) * 4;
+            for s in [b.params, b.grads, b.m, b.v] {
+                assert!(s.size >= end, "adam group {g:?}: buffer {s:?} too small");
+            }
+            if let Some((m, row_len)) = g.mask {
+                assert!(row_len > 0 && m.size >= g.count.div_ceil(row_len) as u64 * 4);
+            }
+            let pc = AdamParams {
+                first: g.first,
+                count: g.count,
+                row_len: g.mask.map_or(1, |m| m.1),
+                use_mask: g.mask.is_some() as u32,
+                lr: g.lr,
+                beta1: h.beta1,
+                beta2: h.beta2,
+                eps: h.eps,
+                bc1,
+                bc2,
+                ..Default::default()
+            };
+            let mask = g.mask.map_or(b.grads, |m| m.0);
+            let blocks = g.count.div_ceil(256);
+            let gx = blocks.clamp(1, 65535);
+            rec.dispatch(
+                &self.pipe,
+                &pc,
+                &[b.params, b.grads, b.m, b.v, mask],
+                [gx, blocks.div_ceil(gx), 1],
+            );
+        }
+        rec.set_zone("");
+    }
+}
