@@ -136,7 +136,6 @@ struct AdamParams {
     uint pad1;
 };
 
-#endif
 
 // src/kernels/raster.rs — camera and image shared by project, bin and project_bwd.
 struct ProjectParams {
@@ -187,3 +186,5 @@ struct DeformParams {
     uint pad0;
     uint pad1;
 };
+
+#endif

@@ -8,7 +8,7 @@ use bytemuck::{Pod, Zeroable};
 use crate::error::Result;
 use crate::model::optim::AdamHyper;
 use crate::shaders;
-use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
+use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
 
 /// Mirrors `AdamParams` in glsl/include/params.glsl (checked by tests/layout.rs).
 #[repr(C)]
@@ -50,12 +50,15 @@ pub struct AdamGroup<'a> {
 
 pub struct Adam {
     pipe: ComputePipeline,
+    /// A zero word: "do not skip", bound when the caller has no guard.
+    no_skip: Buffer,
 }
 
 impl Adam {
     pub fn new(gpu: &Gpu) -> Result<Self> {
         Ok(Adam {
             pipe: gpu.pipeline(&shaders::optim::ADAM)?,
+            no_skip: gpu.buffer_from("adam no-skip", &[0u32; 4])?,
         })
     }
 
@@ -67,6 +70,20 @@ impl Adam {
         groups: &[AdamGroup<'_>],
         h: &AdamHyper,
         step: u32,
+    ) {
+        self.record_guarded(rec, b, groups, h, step, self.no_skip.slice(0, 4));
+    }
+
+    /// As [`Adam::record`], but every update is a no-op when the u32 at `skip` is non-zero
+    /// (written earlier on the GPU, e.g. by the rasteriser's overflow check).
+    pub fn record_guarded(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: AdamBuffers<'_>,
+        groups: &[AdamGroup<'_>],
+        h: &AdamHyper,
+        step: u32,
+        skip: BufSlice<'_>,
     ) {
         let (bc1, bc2) = h.bias_corrections(step);
         rec.set_zone("adam");
@@ -97,7 +114,7 @@ impl Adam {
             rec.dispatch(
                 &self.pipe,
                 &pc,
-                &[b.params, b.grads, b.m, b.v, mask],
+                &[b.params, b.grads, b.m, b.v, mask, skip],
                 [gx, blocks.div_ceil(gx), 1],
             );
         }

@@ -237,6 +237,12 @@ impl RasterBuffers {
     pub fn intersections(&self, gpu: &Gpu) -> Result<u32> {
         Ok(gpu.read::<u32>(self.meta.elems::<u32>(1, 1))?[0])
     }
+
+    /// The u32 that is 1 when the last forward pass overflowed the intersection capacity,
+    /// followed by the needed count: bind it as an optimiser's skip flag, or copy it out.
+    pub fn overflow_flag(&self) -> BufSlice<'_> {
+        self.meta.slice(256, 8)
+    }
 }
 
 fn sort_bits(cam: &Camera) -> u32 {
@@ -334,7 +340,7 @@ impl Rasterizer {
             rects: gpu.buffer("raster tile rects", n * 16)?,
             counts: gpu.buffer("raster tile counts", n * 4)?,
             offsets: gpu.buffer("raster tile offsets", n * 4)?,
-            meta: gpu.buffer("raster bin meta", 256)?,
+            meta: gpu.buffer("raster bin meta", 512)?,
             scan: self.scan.scratch(gpu, n as u32)?,
             sort: self.sort.buffers(
                 gpu,

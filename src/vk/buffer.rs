@@ -86,6 +86,13 @@ impl Buffer {
         self.slice(first * s, count * s)
     }
 
+    /// Contents of a host-visible buffer (`Gpu::host_buffer`) as `T`s. Call after the command
+    /// buffer that wrote it finished.
+    pub fn read_mapped<T: Pod>(&self) -> Vec<T> {
+        let n = self.size as usize / std::mem::size_of::<T>();
+        bytemuck::pod_collect_to_vec(&self.mapped()[..n * std::mem::size_of::<T>()])
+    }
+
     fn mapped_mut(&mut self) -> &mut [u8] {
         self.alloc
             .as_mut()
@@ -169,6 +176,12 @@ impl Gpu {
     /// Device-local buffer of `bytes` bytes (contents undefined).
     pub fn buffer(&self, name: &str, bytes: u64) -> Result<Buffer> {
         self.make_buffer(name, bytes, MemoryLocation::GpuOnly)
+    }
+
+    /// Host-visible buffer for results read every step without an extra submit: copy into it at
+    /// the end of a command buffer, then `read_mapped` after `finish`.
+    pub fn host_buffer(&self, name: &str, bytes: u64) -> Result<Buffer> {
+        self.make_buffer(name, bytes, MemoryLocation::GpuToCpu)
     }
 
     /// Device-local buffer holding `data`.
