@@ -1,6 +1,7 @@
 //! One host wrapper per GLSL stage family: `#[repr(C)]` params mirrored in
 //! `glsl/include/params.glsl`, pipelines built once, `record()` taking explicit buffers.
 
+pub mod densify;
 pub mod loss;
 pub mod radix_sort;
 pub mod raster;
@@ -18,6 +19,39 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         };
     }
     vec![
+        layout!(
+            densify::DensifyStatsParams,
+            num_gaussians,
+            width,
+            height,
+            pad
+        ),
+        layout!(
+            densify::DensifyParams,
+            num_gaussians,
+            capacity,
+            row_len,
+            section,
+            seed,
+            iteration,
+            screen_prune,
+            pad0,
+            grad_threshold,
+            log_dense_scale,
+            min_opacity_logit,
+            max_screen_size,
+            log_max_world_size,
+            pad1,
+            pad2,
+            pad3
+        ),
+        layout!(
+            densify::OpacityResetParams,
+            num_gaussians,
+            reset_logit,
+            pad0,
+            pad1
+        ),
         layout!(
             loss::LossParams,
             width,
