@@ -1,6 +1,7 @@
 //! CPU twins of the GPU stages: same names, same inputs in binding order, plain loops.
 //! They define what the kernels must compute; tests compare the two on identical inputs.
 
+pub mod densify;
 pub mod loss;
 pub mod radix_sort;
 pub mod raster;
