@@ -322,8 +322,13 @@ fn settings(capacity: u32) -> DensifySettings {
 #[test]
 fn densify_step_matches_twin_every_case() {
     let gpu = testing::gpu();
-    for (sh_degree, screen) in [(1u32, true), (0, false), (3, true)] {
-        let n = 600;
+    // 5000 originals: both scans span several 2048-element blocks.
+    for (sh_degree, screen, n) in [
+        (1u32, true, 600),
+        (0, false, 600),
+        (3, true, 600),
+        (0, true, 5000),
+    ] {
         let p = random_gaussians(5 + sh_degree as u64, n, sh_degree);
         let m = random_moments(6, n, sh_degree);
         let v = random_moments(7, n, sh_degree);
@@ -335,7 +340,7 @@ fn densify_step_matches_twin_every_case() {
         }
         let want = twin::densify(&p, &m, &v, &stats, &s);
         let r = want.report;
-        let ctx = format!("sh {sh_degree}, screen prune {screen}");
+        let ctx = format!("n {n}, sh {sh_degree}, screen prune {screen}");
         assert_eq!(r.downgraded, 0, "{ctx}: the budget should not bind here");
         assert!(r.kept > 0 && r.cloned > 0 && r.split > 0, "{ctx}: {r:?}");
         assert!(r.pruned_opacity > 0, "{ctx}: no opacity prune: {r:?}");
@@ -364,6 +369,71 @@ fn densify_step_matches_twin_every_case() {
             got.params.means.iter().flatten().all(|x| x.is_finite()),
             "{ctx}: non-finite means"
         );
+    }
+}
+
+/// Two steps in a row on reused buffers, swapping src and dst in between as the trainer does;
+/// each step equals the twin applied to that step's GPU input.
+#[test]
+fn consecutive_steps_with_swapped_buffers() {
+    let gpu = testing::gpu();
+    let dens = Densifier::new(&gpu).unwrap();
+    let n0 = 400;
+    let layout = GaussianLayout::new(1000, 1);
+    let mut model = Model::new(&gpu, layout);
+    model.upload(
+        &gpu,
+        &random_gaussians(61, n0, 1),
+        &random_moments(62, n0, 1),
+        &random_moments(63, n0, 1),
+    );
+    let b = dens.buffers(&gpu, layout.capacity).unwrap();
+    let mut n = n0 as u32;
+    for step in 0..2u32 {
+        let dl = |buf| HostGaussians::download(&gpu, &layout, buf, n).unwrap();
+        let (p, m, v) = (dl(&model.params), dl(&model.m), dl(&model.v));
+        let stats = random_stats(64 + step as u64, n as usize, layout.capacity as usize);
+        upload_stats(&gpu, &b, &stats);
+        let s = DensifySettings {
+            iteration: 500 + 100 * step,
+            ..settings(layout.capacity)
+        };
+        let mut rec = Recorder::new(&gpu).unwrap();
+        dens.record_densify(&mut rec, &b, model.src(), model.dst(), n, &s)
+            .unwrap();
+        rec.finish().unwrap();
+        let count = b.read_count(&gpu).unwrap();
+        let want = twin::densify(&p, &m, &v, &stats, &s);
+        let got = GpuOut {
+            count,
+            actions: b.read_actions(&gpu, n).unwrap(),
+            params: HostGaussians::download(&gpu, &layout, &model.params_next, count).unwrap(),
+            m: HostGaussians::download(&gpu, &layout, &model.m_next, count).unwrap(),
+            v: HostGaussians::download(&gpu, &layout, &model.v_next, count).unwrap(),
+            stats_after: read_stats(&gpu, &b, layout.capacity as usize),
+        };
+        compare(&format!("step {step}"), &got, &want, &p);
+        assert!(want.report.cloned + want.report.split > 0);
+        // The trainer's swap.
+        let Model {
+            params,
+            m,
+            v,
+            params_next,
+            m_next,
+            v_next,
+            layout,
+        } = model;
+        model = Model {
+            layout,
+            params: params_next,
+            m: m_next,
+            v: v_next,
+            params_next: params,
+            m_next: m,
+            v_next: v,
+        };
+        n = count;
     }
 }
 

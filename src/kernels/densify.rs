@@ -15,6 +15,11 @@
 //! Output row order: originals in index order, each contributing its surviving rows
 //! (keep: [original]; clone: [original, copy]; split: [child 0, child 1]).
 //!
+//! Screen-size prune: an original row is tested with its accumulated `max_radii`, new rows
+//! (copies, children) with 0. (The official 3DGS code zeroes `max_radii2D` for every point in
+//! `densification_postfix` before its prune, which makes that test a no-op there; here it acts
+//! as the paper describes.)
+//!
 //! Budget rule (exact, deterministic): originals are processed in index order with a running
 //! row total starting at N; an original whose growth (+1 for clone or split) would push the
 //! total past `capacity` is downgraded to keep (its prune test still applies). Pruning only
