@@ -187,4 +187,41 @@ struct DeformParams {
     uint pad1;
 };
 
+// src/kernels/densify.rs — per-view densification statistics (after every backward pass).
+struct DensifyStatsParams {
+    uint num_gaussians;
+    uint width;         // image size: ∂L/∂ndc = ∂L/∂pixel · (W/2, H/2)
+    uint height;
+    uint pad;
+};
+
+// src/kernels/densify.rs — densify step (grow, mark, count, write). Thresholds arrive
+// pre-transformed by the host (log / logit space) so the kernels only compare f32 values.
+struct DensifyParams {
+    uint num_gaussians;       // originals: rows of the source buffers
+    uint capacity;            // output row budget (>= num_gaussians)
+    uint row_len;             // write: floats per row of the bound section
+    uint section;             // write: 0 plain copy, 1 means (split: sample), 2 log scales (split: shrink)
+    uint seed;
+    uint iteration;
+    uint screen_prune;        // 1: also prune by screen size and world size (max_screen_size > 0)
+    uint pad0;
+    float grad_threshold;     // on the average ‖∂L/∂ndc‖ (compared as accum >= thr · denom)
+    float log_dense_scale;    // ln(percent_dense · extent): clone if max log-scale <=, split if >
+    float min_opacity_logit;  // logit(min_opacity): prune a row whose logit is below
+    float max_screen_size;    // pixels: prune a row whose max radius is above
+    float log_max_world_size; // ln(max_world_size): prune a row whose max log-scale is above
+    float pad1;
+    float pad2;
+    float pad3;
+};
+
+// src/kernels/densify.rs — opacity reset (every 3000 iterations).
+struct OpacityResetParams {
+    uint num_gaussians;
+    float reset_logit;        // logit(0.01): logits above it are lowered to it
+    uint pad0;
+    uint pad1;
+};
+
 #endif

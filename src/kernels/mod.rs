@@ -3,6 +3,7 @@
 
 pub mod adam;
 pub mod deform;
+pub mod densify;
 pub mod loss;
 pub mod mlp;
 pub mod mlp_fused;
@@ -23,6 +24,39 @@ pub fn param_layouts() -> Vec<ParamLayout> {
     }
     vec![
         layout!(deform::DeformParams, n, use_deform, pad0, pad1),
+        layout!(
+            densify::DensifyStatsParams,
+            num_gaussians,
+            width,
+            height,
+            pad
+        ),
+        layout!(
+            densify::DensifyParams,
+            num_gaussians,
+            capacity,
+            row_len,
+            section,
+            seed,
+            iteration,
+            screen_prune,
+            pad0,
+            grad_threshold,
+            log_dense_scale,
+            min_opacity_logit,
+            max_screen_size,
+            log_max_world_size,
+            pad1,
+            pad2,
+            pad3
+        ),
+        layout!(
+            densify::OpacityResetParams,
+            num_gaussians,
+            reset_logit,
+            pad0,
+            pad1
+        ),
         layout!(
             loss::LossParams,
             width,

@@ -3,6 +3,7 @@
 
 pub mod adam;
 pub mod deform;
+pub mod densify;
 pub mod loss;
 pub mod mlp;
 pub mod radix_sort;
