@@ -18,6 +18,8 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// Train a deformable Gaussian model (default: the built-in synthetic scene, fast preset).
+    Train(dispflow_vk::train::cli::TrainArgs),
     /// List the Vulkan devices and the limits that matter to the kernels.
     Devices,
     /// Time the GPU kernels (sort, scan) with GPU timestamps and print a table.

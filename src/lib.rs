@@ -16,6 +16,7 @@ pub mod model;
 pub mod reference;
 pub mod shaders;
 pub mod testing;
+pub mod train;
 pub mod vk;
 
 pub use error::{Error, Result};

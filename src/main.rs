@@ -9,6 +9,9 @@ use dispflow_vk::vk::Gpu;
 fn main() -> anyhow::Result<()> {
     let cli = cli::Cli::parse();
     match cli.command {
+        cli::Command::Train(args) => {
+            dispflow_vk::train::cli::run(&args)?;
+        }
         cli::Command::Devices => {
             for (i, (name, kind)) in dispflow_vk::vk::list_devices()?.iter().enumerate() {
                 println!("{i}: {name} ({kind})");

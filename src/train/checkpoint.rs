@@ -40,7 +40,10 @@ struct Header {
 }
 
 fn io_err(path: &Path, source: std::io::Error) -> Error {
-    Error::Io { path: path.display().to_string(), source }
+    Error::Io {
+        path: path.display().to_string(),
+        source,
+    }
 }
 
 fn gauss_blobs<'a>(prefix: &str, g: &'a HostGaussians, out: &mut Vec<(String, &'a [f32])>) {
@@ -52,8 +55,16 @@ fn gauss_blobs<'a>(prefix: &str, g: &'a HostGaussians, out: &mut Vec<(String, &'
     out.push((format!("{prefix}sh_rest"), &g.sh_rest));
 }
 
-fn take_gauss(prefix: &str, m: &mut BTreeMap<String, Vec<f32>>, sh_coeffs: u32, path: &Path) -> Result<HostGaussians> {
-    let mut get = |k: &str| m.remove(&format!("{prefix}{k}")).ok_or_else(|| bad(path, &format!("blob {prefix}{k} missing")));
+fn take_gauss(
+    prefix: &str,
+    m: &mut BTreeMap<String, Vec<f32>>,
+    sh_coeffs: u32,
+    path: &Path,
+) -> Result<HostGaussians> {
+    let mut get = |k: &str| {
+        m.remove(&format!("{prefix}{k}"))
+            .ok_or_else(|| bad(path, &format!("blob {prefix}{k} missing")))
+    };
     fn arr<const N: usize>(v: Vec<f32>) -> Vec<[f32; N]> {
         v.chunks_exact(N).map(|c| c.try_into().unwrap()).collect()
     }
@@ -73,7 +84,10 @@ fn take_gauss(prefix: &str, m: &mut BTreeMap<String, Vec<f32>>, sh_coeffs: u32, 
         || g.sh_dc.len() != n
         || g.sh_rest.len() != n * 3 * (sh_coeffs as usize - 1)
     {
-        return Err(bad(path, &format!("{prefix}Gaussian blobs disagree on the count ({n})")));
+        return Err(bad(
+            path,
+            &format!("{prefix}Gaussian blobs disagree on the count ({n})"),
+        ));
     }
     Ok(g)
 }
@@ -103,7 +117,10 @@ impl Checkpoint {
         gauss_blobs("", &self.gaussians, &mut blobs);
         gauss_blobs("m.", &self.gauss_m, &mut blobs);
         gauss_blobs("v.", &self.gauss_v, &mut blobs);
-        for (k, v) in ["grad_accum", "denom", "max_radii"].iter().zip(&self.densify_stats) {
+        for (k, v) in ["grad_accum", "denom", "max_radii"]
+            .iter()
+            .zip(&self.densify_stats)
+        {
             blobs.push((k.to_string(), v));
         }
         blobs.push(("mlp_params".into(), &self.mlp_params));
@@ -113,10 +130,14 @@ impl Checkpoint {
             version: 1,
             iteration: self.iteration,
             sh_coeffs: self.gaussians.sh_coeffs,
-            blobs: blobs.iter().map(|(k, v)| (k.clone(), v.len() as u64)).collect(),
+            blobs: blobs
+                .iter()
+                .map(|(k, v)| (k.clone(), v.len() as u64))
+                .collect(),
         };
         let h = serde_json::to_vec(&header).expect("header serialises");
-        let mut out = Vec::with_capacity(16 + h.len() + blobs.iter().map(|b| b.1.len() * 4).sum::<usize>());
+        let mut out =
+            Vec::with_capacity(16 + h.len() + blobs.iter().map(|b| b.1.len() * 4).sum::<usize>());
         out.extend_from_slice(MAGIC);
         out.extend_from_slice(&(h.len() as u64).to_le_bytes());
         out.extend_from_slice(&h);
@@ -136,15 +157,21 @@ impl Checkpoint {
             return Err(bad(path, "wrong magic (expected DFVKCKPT)"));
         }
         let hl = u64::from_le_bytes(bytes[8..16].try_into().unwrap()) as usize;
-        let hdr = bytes.get(16..16usize.saturating_add(hl)).ok_or_else(|| bad(path, "truncated header"))?;
-        let header: Header = serde_json::from_slice(hdr).map_err(|e| bad(path, &format!("header: {e}")))?;
+        let hdr = bytes
+            .get(16..16usize.saturating_add(hl))
+            .ok_or_else(|| bad(path, "truncated header"))?;
+        let header: Header =
+            serde_json::from_slice(hdr).map_err(|e| bad(path, &format!("header: {e}")))?;
         if header.version != 1 || !matches!(header.sh_coeffs, 1 | 4 | 9 | 16) {
             return Err(bad(path, "unsupported version or SH coefficient count"));
         }
         let mut at = 16 + hl;
         let mut m = BTreeMap::new();
         for (k, len) in header.blobs {
-            let end = (len as usize).checked_mul(4).and_then(|b| b.checked_add(at)).filter(|&e| e <= bytes.len());
+            let end = (len as usize)
+                .checked_mul(4)
+                .and_then(|b| b.checked_add(at))
+                .filter(|&e| e <= bytes.len());
             let end = end.ok_or_else(|| bad(path, &format!("blob {k} truncated")))?;
             m.insert(k, bytemuck::pod_collect_to_vec::<u8, f32>(&bytes[at..end]));
             at = end;
@@ -156,17 +183,32 @@ impl Checkpoint {
         let gaussians = take_gauss("", &mut m, sc, path)?;
         let gauss_m = take_gauss("m.", &mut m, sc, path)?;
         let gauss_v = take_gauss("v.", &mut m, sc, path)?;
-        let mut get = |k: &str| m.remove(k).ok_or_else(|| bad(path, &format!("blob {k} missing")));
+        let mut get = |k: &str| {
+            m.remove(k)
+                .ok_or_else(|| bad(path, &format!("blob {k} missing")))
+        };
         let densify_stats = [get("grad_accum")?, get("denom")?, get("max_radii")?];
         let n = gaussians.len();
         if gauss_m.len() != n || gauss_v.len() != n || densify_stats.iter().any(|s| s.len() != n) {
-            return Err(bad(path, "moment or statistics blobs disagree with the Gaussian count"));
+            return Err(bad(
+                path,
+                "moment or statistics blobs disagree with the Gaussian count",
+            ));
         }
         let (mlp_params, mlp_m, mlp_v) = (get("mlp_params")?, get("mlp_m")?, get("mlp_v")?);
         if mlp_m.len() != mlp_params.len() || mlp_v.len() != mlp_params.len() {
             return Err(bad(path, "MLP moments disagree with the parameter count"));
         }
-        Ok(Checkpoint { iteration: header.iteration, gaussians, gauss_m, gauss_v, densify_stats, mlp_params, mlp_m, mlp_v })
+        Ok(Checkpoint {
+            iteration: header.iteration,
+            gaussians,
+            gauss_m,
+            gauss_v,
+            densify_stats,
+            mlp_params,
+            mlp_m,
+            mlp_v,
+        })
     }
 }
 
@@ -182,9 +224,18 @@ pub fn write_ply(path: &Path, g: &HostGaussians) -> Result<()> {
     let rest = 3 * (g.sh_coeffs as usize - 1);
     let mut h = String::from("ply\nformat binary_little_endian 1.0\n");
     h += &format!("element vertex {}\n", g.len());
-    let mut props: Vec<String> = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"].map(String::from).to_vec();
+    let mut props: Vec<String> = [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+    ]
+    .map(String::from)
+    .to_vec();
     props.extend((0..rest).map(|i| format!("f_rest_{i}")));
-    props.extend(["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"].map(String::from));
+    props.extend(
+        [
+            "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+        ]
+        .map(String::from),
+    );
     for p in &props {
         h += &format!("property float {p}\n");
     }
@@ -212,7 +263,11 @@ pub fn write_ply(path: &Path, g: &HostGaussians) -> Result<()> {
 pub fn read_ply(path: &Path) -> Result<HostGaussians> {
     let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
     let bad = |why: &str| Error::Invalid(format!("{}: {why}", path.display()));
-    let end = bytes.windows(11).position(|w| w == b"end_header\n").ok_or_else(|| bad("no end_header"))? + 11;
+    let end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .ok_or_else(|| bad("no end_header"))?
+        + 11;
     let header = std::str::from_utf8(&bytes[..end]).map_err(|_| bad("header is not text"))?;
     if !header.contains("format binary_little_endian 1.0") {
         return Err(bad("expected format binary_little_endian 1.0"));
@@ -224,23 +279,43 @@ pub fn read_ply(path: &Path) -> Result<HostGaussians> {
         match w.as_slice() {
             ["element", "vertex", c] => n = c.parse::<usize>().ok(),
             ["property", "float", name] => props.push(name.to_string()),
-            ["property", ty, name] => return Err(bad(&format!("property {name}: expected float, found {ty}"))),
+            ["property", ty, name] => {
+                return Err(bad(&format!("property {name}: expected float, found {ty}")))
+            }
             _ => {}
         }
     }
     let n = n.ok_or_else(|| bad("no `element vertex N` line"))?;
-    let idx = |name: &str| props.iter().position(|p| p == name).ok_or_else(|| bad(&format!("property {name} missing")));
+    let idx = |name: &str| {
+        props
+            .iter()
+            .position(|p| p == name)
+            .ok_or_else(|| bad(&format!("property {name} missing")))
+    };
     let rest = props.iter().filter(|p| p.starts_with("f_rest_")).count();
     if rest % 3 != 0 || !matches!(rest / 3 + 1, 1 | 4 | 9 | 16) {
-        return Err(bad(&format!("{rest} f_rest properties: expected 0, 9, 24 or 45")));
+        return Err(bad(&format!(
+            "{rest} f_rest properties: expected 0, 9, 24 or 45"
+        )));
     }
     let stride = props.len();
-    let data = bytes.get(end..end + n * stride * 4).ok_or_else(|| bad("truncated vertex data"))?;
+    let data = bytes
+        .get(end..end + n * stride * 4)
+        .ok_or_else(|| bad("truncated vertex data"))?;
     let f: Vec<f32> = bytemuck::pod_collect_to_vec(data);
-    let (x, dc, op, sc, rot) = (idx("x")?, idx("f_dc_0")?, idx("opacity")?, idx("scale_0")?, idx("rot_0")?);
+    let (x, dc, op, sc, rot) = (
+        idx("x")?,
+        idx("f_dc_0")?,
+        idx("opacity")?,
+        idx("scale_0")?,
+        idx("rot_0")?,
+    );
     let r0 = if rest > 0 { idx("f_rest_0")? } else { 0 };
     let k = rest / 3;
-    let mut g = HostGaussians { sh_coeffs: (k + 1) as u32, ..Default::default() };
+    let mut g = HostGaussians {
+        sh_coeffs: (k + 1) as u32,
+        ..Default::default()
+    };
     for i in 0..n {
         let row = &f[i * stride..(i + 1) * stride];
         g.means.push([row[x], row[x + 1], row[x + 2]]);
@@ -252,7 +327,8 @@ pub fn read_ply(path: &Path) -> Result<HostGaussians> {
         }
         g.opacity.push(row[op]);
         g.log_scales.push([row[sc], row[sc + 1], row[sc + 2]]);
-        g.quats.push([row[rot], row[rot + 1], row[rot + 2], row[rot + 3]]);
+        g.quats
+            .push([row[rot], row[rot + 1], row[rot + 2], row[rot + 3]]);
     }
     Ok(g)
 }

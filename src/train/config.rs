@@ -98,6 +98,9 @@ pub struct TrainConfig {
     pub mlp_depth: u32,
     /// Iterations with D ≡ 0 before the deformation network is trained.
     pub warm_up: u32,
+    /// Start the deformation head at zero (D = 0 exactly when the warm-up ends) instead of
+    /// PyTorch's random init, which displaces and inflates every Gaussian at once.
+    pub zero_deform_head: bool,
     pub lambda_ssim: f32,
     pub background: Background,
     /// Time noise (AST) of Deformable-3DGS; `None` = on for real captures, off for synthetic.
@@ -137,6 +140,7 @@ impl TrainConfig {
             mlp_width: 256,
             mlp_depth: 8,
             warm_up: 3000,
+            zero_deform_head: true,
             lambda_ssim: 0.2,
             background: Background::Black,
             time_noise: None,
@@ -180,11 +184,17 @@ impl TrainConfig {
 
     /// Reads a TOML file (every field optional over `base`).
     pub fn from_toml_over(base: &TrainConfig, path: &std::path::Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
         let mut merged = toml::Value::try_from(base).expect("config serialises");
-        let user: toml::Value = toml::from_str(&text).map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+        let user: toml::Value = toml::from_str(&text)
+            .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
         merge(&mut merged, user);
-        let cfg: TrainConfig = merged.try_into().map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+        let cfg: TrainConfig = merged
+            .try_into()
+            .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
         cfg.validate()?;
         Ok(cfg)
     }
@@ -212,7 +222,10 @@ impl TrainConfig {
             return bad("densify.budget", "must be at least 1");
         }
         if self.sh_interval == 0 || self.densify.interval == 0 || self.log_interval == 0 {
-            return bad("sh_interval/densify.interval/log_interval", "must be at least 1");
+            return bad(
+                "sh_interval/densify.interval/log_interval",
+                "must be at least 1",
+            );
         }
         if !self.motion_weight.is_finite() || self.motion_weight < 0.0 {
             return bad("motion_weight", "expected a finite value >= 0");

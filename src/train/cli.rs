@@ -1,0 +1,315 @@
+//! `dispflow-vk train`: flags, the run loop with progress and outputs.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::checkpoint::{last_checkpoint, write_atomic, write_ply, Checkpoint};
+use super::config::{Background, Preset, TrainConfig};
+use super::Trainer;
+use crate::data::synthetic::{self, Preset as ScenePreset};
+use crate::data::{self, LoadOptions};
+use crate::error::{Error, Result};
+use crate::vk::Gpu;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct TrainArgs {
+    /// Dataset directory (nerfies or D-NeRF/blender format). Default: the built-in synthetic
+    /// scene (small preset), generated once into the cache directory.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Output directory. Default: runs/<dataset name>.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Starting configuration. Default: `fast` for the built-in scene, `paper` with --data.
+    #[arg(long, value_enum)]
+    pub preset: Option<Preset>,
+    /// TOML file overriding fields of the preset (same names as the run's config.toml).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Training iterations [preset: paper 20000, fast 1500].
+    #[arg(long)]
+    pub iterations: Option<u32>,
+    /// Continue from OUT/checkpoints/last.ckpt when it exists (same configuration).
+    #[arg(long)]
+    pub resume: bool,
+    /// Largest image side after loading, in pixels [preset: paper none, fast 160].
+    #[arg(long)]
+    pub max_resolution: Option<u32>,
+    /// Highest SH degree, 0-3 [preset: paper 3, fast 1].
+    #[arg(long)]
+    pub sh_degree: Option<u32>,
+    /// Deformation MLP width [preset: paper 256, fast 64].
+    #[arg(long)]
+    pub mlp_width: Option<u32>,
+    /// Deformation MLP depth [preset: paper 8, fast 4].
+    #[arg(long)]
+    pub mlp_depth: Option<u32>,
+    /// Most Gaussians the run may hold [preset: paper 500000, fast 30000].
+    #[arg(long)]
+    pub budget: Option<u32>,
+    /// Background used in training [default: black].
+    #[arg(long, value_enum)]
+    pub background: Option<Background>,
+    /// Seed of everything random (initial points, frame order, MLP init) [default: 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Print a per-kernel GPU time breakdown at every log line.
+    #[arg(short, long)]
+    pub verbose: bool,
+}
+
+/// What `train` writes to `metrics.json`.
+#[derive(Debug, Serialize)]
+pub struct Metrics {
+    pub psnr: f64,
+    pub ssim: f64,
+    pub l1: f64,
+    pub initial_psnr: f64,
+    pub iterations: u32,
+    pub num_gaussians: u32,
+    /// Median wall-clock milliseconds per training step (submit + wait).
+    pub ms_per_step: f64,
+    pub device: String,
+    pub dataset: String,
+    pub per_frame: Vec<FrameMetrics>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct FrameMetrics {
+    pub id: String,
+    pub psnr: f64,
+    pub ssim: f64,
+}
+
+/// Where the built-in scene is cached: `$XDG_CACHE_HOME` or `~/.cache`, else `./.cache`.
+pub fn cache_dir() -> PathBuf {
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .unwrap_or_else(|| PathBuf::from(".cache"));
+    base.join("dispflow-vk")
+}
+
+/// The built-in scene (generated on first use; a complete generation is marked by
+/// `synthetic.json`, so an interrupted one is redone).
+pub fn builtin_scene(preset: ScenePreset, seed: u64) -> Result<PathBuf> {
+    let dir = cache_dir().join(format!("synthetic-{}-seed{seed}", preset.name()));
+    if !dir.join("synthetic.json").is_file() {
+        let tmp = dir.with_extension("partial");
+        let _ = std::fs::remove_dir_all(&tmp);
+        eprintln!(
+            "generating the built-in synthetic scene ({}) into {}",
+            preset.name(),
+            dir.display()
+        );
+        synthetic::generate(preset, seed, &tmp)?;
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::rename(&tmp, &dir).map_err(|source| Error::Io {
+            path: dir.display().to_string(),
+            source,
+        })?;
+    }
+    Ok(dir)
+}
+
+/// Resolves flags over the preset and the optional TOML file.
+pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
+    let preset = a.preset.unwrap_or(if a.data.is_none() {
+        Preset::Fast
+    } else {
+        Preset::Paper
+    });
+    let mut c = TrainConfig::preset(preset);
+    if let Some(p) = &a.config {
+        c = TrainConfig::from_toml_over(&c, p)?;
+    }
+    if let Some(v) = a.iterations {
+        c.iterations = v;
+        c.densify.until = c.densify.until.min(v);
+    }
+    c.max_resolution = a.max_resolution.or(c.max_resolution);
+    c.sh_degree = a.sh_degree.unwrap_or(c.sh_degree);
+    c.mlp_width = a.mlp_width.unwrap_or(c.mlp_width);
+    c.mlp_depth = a.mlp_depth.unwrap_or(c.mlp_depth);
+    c.densify.budget = a.budget.unwrap_or(c.densify.budget);
+    c.background = a.background.unwrap_or(c.background);
+    c.seed = a.seed.unwrap_or(c.seed);
+    c.validate()?;
+    Ok(c)
+}
+
+fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
+    move |source| Error::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+/// The whole `train` command. Returns the metrics it wrote.
+pub fn run(a: &TrainArgs) -> Result<Metrics> {
+    let cfg = resolve_config(a)?;
+    let data_dir = match &a.data {
+        Some(d) => d.clone(),
+        None => builtin_scene(ScenePreset::Small, 0)?,
+    };
+    let name = data_dir
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "run".into());
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs").join(&name));
+    let bg = match cfg.background {
+        Background::White => [1.0; 3],
+        _ => [0.0; 3],
+    };
+    let opts = LoadOptions {
+        max_size: cfg.max_resolution,
+        background: bg,
+        seed: cfg.seed,
+        ..LoadOptions::default()
+    };
+    let dataset = data::load(&data_dir, &opts)?;
+    let gpu = Gpu::new_default()?;
+    eprintln!("device: {}", gpu.info);
+    let mut tr = Trainer::new(&gpu, &cfg, &dataset)?;
+    std::fs::create_dir_all(out.join("checkpoints")).map_err(io(&out))?;
+    let ckpt = last_checkpoint(&out);
+    if a.resume && ckpt.is_file() {
+        let c = Checkpoint::load(&ckpt)?;
+        tr.restore(&c)?;
+        eprintln!(
+            "resumed from {} at iteration {}",
+            ckpt.display(),
+            tr.iteration
+        );
+    } else {
+        write_atomic(&out.join("config.toml"), cfg.to_toml().as_bytes())?;
+    }
+    eprintln!(
+        "training {} frames ({} val) at {}×{}, {} Gaussians, MLP {}×{}, {} iterations",
+        tr.frames.len(),
+        tr.val.len(),
+        dataset.train[0].camera.width,
+        dataset.train[0].camera.height,
+        tr.n,
+        cfg.mlp_depth,
+        cfg.mlp_width,
+        cfg.iterations
+    );
+    let initial_psnr = mean(
+        &tr.evaluate(None)?
+            .iter()
+            .map(|v| v.1.psnr)
+            .collect::<Vec<_>>(),
+    );
+    let pb = indicatif::ProgressBar::new(cfg.iterations as u64);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}, {per_sec}] {msg}",
+        )
+        .expect("progress template"),
+    );
+    pb.set_position(tr.iteration as u64);
+    let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let mut step_ms = Vec::new();
+    while tr.iteration < cfg.iterations {
+        let log = (tr.iteration + 1) % cfg.log_interval == 0 || tr.iteration + 1 == cfg.iterations;
+        let t0 = Instant::now();
+        let info = tr.step(log, log && a.verbose)?;
+        step_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        pb.set_position(tr.iteration as u64);
+        if let Some(l) = info {
+            if !l.loss.loss.is_finite() {
+                return Err(Error::Invalid(format!(
+                    "iteration {}: the loss is not finite ({:?})",
+                    l.iteration, l.loss
+                )));
+            }
+            let msg = format!(
+                "loss {:.4} psnr {:.2} gaussians {}",
+                l.loss.loss, l.loss.psnr, l.num_gaussians
+            );
+            pb.set_message(msg.clone());
+            if !tty {
+                eprintln!("[{}/{}] {msg}", l.iteration, cfg.iterations);
+            }
+            if a.verbose {
+                let total = l.timings.total_ms();
+                let rows: Vec<String> = l
+                    .timings
+                    .by_label()
+                    .iter()
+                    .map(|(k, ms)| {
+                        format!(
+                            "  {k:<28} {ms:8.3} ms {:5.1}%",
+                            100.0 * ms / total.max(1e-9)
+                        )
+                    })
+                    .collect();
+                pb.suspend(|| {
+                    eprintln!(
+                        "GPU time of iteration {} ({total:.2} ms):\n{}",
+                        l.iteration,
+                        rows.join("\n")
+                    )
+                });
+            }
+        }
+        if tr.iteration % cfg.checkpoint_interval == 0 || tr.iteration == cfg.iterations {
+            tr.checkpoint()?.save(&ckpt)?;
+        }
+    }
+    pb.finish_and_clear();
+
+    let renders = out.join("renders");
+    let per = tr.evaluate(Some(&renders))?;
+    let g = tr.gaussians()?;
+    write_ply(&out.join("point_cloud.ply"), &g)?;
+    let mlp: Vec<f32> = gpu.read(tr.mlp_params.all())?;
+    write_atomic(&out.join("deform.bin"), bytemuck::cast_slice(&mlp))?;
+    let metrics = Metrics {
+        psnr: mean(&per.iter().map(|v| v.1.psnr).collect::<Vec<_>>()),
+        ssim: mean(&per.iter().map(|v| v.1.ssim).collect::<Vec<_>>()),
+        l1: mean(&per.iter().map(|v| v.1.l1).collect::<Vec<_>>()),
+        initial_psnr,
+        iterations: tr.iteration,
+        num_gaussians: tr.n,
+        ms_per_step: crate::bench::median(step_ms),
+        device: gpu.info.to_string(),
+        dataset: data_dir.display().to_string(),
+        per_frame: per
+            .iter()
+            .map(|(id, v)| FrameMetrics {
+                id: id.clone(),
+                psnr: v.psnr,
+                ssim: v.ssim,
+            })
+            .collect(),
+    };
+    let text = serde_json::to_string_pretty(&metrics).expect("metrics serialise");
+    write_atomic(&out.join("metrics.json"), text.as_bytes())?;
+    println!(
+        "test PSNR {:.2} dB (initial {:.2}), SSIM {:.4}, {} Gaussians, {:.1} ms/step; outputs in {}",
+        metrics.psnr,
+        metrics.initial_psnr,
+        metrics.ssim,
+        metrics.num_gaussians,
+        metrics.ms_per_step,
+        out.display()
+    );
+    Ok(metrics)
+}
+
+/// Mean of finite values (PSNR of a perfect frame is +∞ and would swamp it).
+fn mean(v: &[f64]) -> f64 {
+    let f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if f.is_empty() {
+        f64::NAN
+    } else {
+        f.iter().sum::<f64>() / f.len() as f64
+    }
+}

@@ -1,0 +1,859 @@
+//! Training: the Deformable-3DGS step as a list of kernel calls over explicit buffers, the
+//! recipe around it (schedules, densification, SH growth, time noise), evaluation and outputs.
+
+pub mod checkpoint;
+pub mod cli;
+pub mod config;
+
+use std::path::Path;
+
+use crate::data::{Dataset, Frame};
+use crate::error::{Error, Result};
+use crate::kernels::adam::{Adam, AdamBuffers, AdamGroup};
+use crate::kernels::deform::{Canonical, DeformApply, Drawn};
+use crate::kernels::densify::{Densifier, DensifyBuffers, DensifySettings, GaussianBuffers};
+use crate::kernels::loss::{LossBuffers, LossValues, PhotometricLoss};
+use crate::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
+use crate::kernels::raster::{
+    Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
+};
+use crate::model::deform::{MlpConfig, TimeEncoding};
+use crate::model::gaussians::{GaussianLayout, HostGaussians, Section};
+use crate::model::optim::{AdamHyper, ExpLr};
+use crate::vk::{Buffer, Gpu, Recorder, Timings};
+use checkpoint::Checkpoint;
+use config::{Background, TrainConfig};
+
+/// A frame on the GPU: raster camera, time and the target image as [H·W] vec4.
+pub struct GpuFrame {
+    pub id: String,
+    pub camera: Camera,
+    pub time: f32,
+    pub target: Buffer,
+}
+
+/// Converts a loaded camera (OpenCV, glam) to the rasteriser's.
+pub fn raster_camera(c: &crate::data::camera::Camera, near: f32) -> Camera {
+    let r = c.rotation;
+    Camera {
+        rot: [
+            r.row(0).to_array(),
+            r.row(1).to_array(),
+            r.row(2).to_array(),
+        ],
+        trans: c.translation.to_array(),
+        fx: c.fx,
+        fy: c.fy,
+        cx: c.cx,
+        cy: c.cy,
+        width: c.width,
+        height: c.height,
+        near,
+    }
+}
+
+fn upload_frame(gpu: &Gpu, f: &Frame, near: f32) -> Result<GpuFrame> {
+    let px = (f.image.width * f.image.height) as usize;
+    if f.image.data.len() != 3 * px {
+        return Err(Error::Invalid(format!(
+            "{}: image holds {} values, expected {}",
+            f.image_path.display(),
+            f.image.data.len(),
+            3 * px
+        )));
+    }
+    let rgba: Vec<[f32; 4]> = f
+        .image
+        .data
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2], 1.0])
+        .collect();
+    Ok(GpuFrame {
+        id: f.id.clone(),
+        camera: raster_camera(&f.camera, near),
+        time: f.time,
+        target: gpu.buffer_from(&format!("target {}", f.id), &rgba)?,
+    })
+}
+
+/// 3DGS's camera extent: 1.1 × the largest distance of a camera centre from their mean.
+pub fn camera_extent(frames: &[Frame]) -> f32 {
+    let centres: Vec<glam::Vec3> = frames.iter().map(|f| f.camera.centre()).collect();
+    let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len().max(1) as f32;
+    let r = centres
+        .iter()
+        .map(|c| c.distance(mean))
+        .fold(0.0f32, f32::max);
+    1.1 * r.max(1e-3)
+}
+
+/// SplitMix-style hash → uniform in (0, 1), for per-iteration choices that must not depend on
+/// how many random numbers were drawn before (so a resumed run makes the same choices).
+fn hash_uniform(seed: u64, a: u64, b: u64) -> f64 {
+    let mut z =
+        seed ^ a.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ b.wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+}
+
+/// Training frame of 1-based `iteration`: a fresh shuffle of all frames every epoch, as 3DGS
+/// draws cameras, but seeded by (seed, epoch) so it depends on the iteration alone.
+pub fn frame_for_iteration(seed: u64, iteration: u32, frames: usize) -> usize {
+    let i = (iteration as usize).saturating_sub(1);
+    let (epoch, k) = (i / frames, i % frames);
+    let mut perm: Vec<usize> = (0..frames).collect();
+    for j in (1..frames).rev() {
+        let r = (hash_uniform(seed, epoch as u64, j as u64) * (j + 1) as f64) as usize;
+        perm.swap(j, r.min(j));
+    }
+    perm[k]
+}
+
+/// Numbers reported per logged step.
+#[derive(Clone, Debug, Default)]
+pub struct StepLog {
+    pub iteration: u32,
+    pub loss: LossValues,
+    pub num_gaussians: u32,
+    pub timings: Timings,
+}
+
+impl Default for LossValues {
+    fn default() -> Self {
+        LossValues::new(0.0, 0.0, 0.0, 0.2)
+    }
+}
+
+/// Everything the training step reads and writes, allocated once for the Gaussian budget.
+pub struct Trainer<'g> {
+    pub gpu: &'g Gpu,
+    pub cfg: TrainConfig,
+    pub mlp_cfg: MlpConfig,
+    raster: Rasterizer,
+    deform: DeformApply,
+    loss: PhotometricLoss,
+    mlp: Mlp,
+    adam: Adam,
+    densifier: Densifier,
+    pub layout: GaussianLayout,
+    /// Live Gaussians (rows 0..n of every section).
+    pub n: u32,
+    pub params: Buffer,
+    grads: Buffer,
+    m: Buffer,
+    v: Buffer,
+    /// Densification writes the next generation here; the two are swapped after.
+    next: [Buffer; 3],
+    densify_bufs: DensifyBuffers,
+    pub mlp_params: Buffer,
+    mlp_grads: Buffer,
+    mlp_m: Buffer,
+    mlp_v: Buffer,
+    mlp_bufs: MlpBuffers,
+    drawn: [Buffer; 3],
+    d_drawn_dummy: Buffer,
+    deform_out: Buffer,
+    d_deform: Buffer,
+    pub raster_bufs: RasterBuffers,
+    loss_bufs: LossBuffers,
+    d_render: Buffer,
+    zero_depth: Buffer,
+    /// Overflow flag and needed intersection count, copied here at the end of every step.
+    step_flags: Buffer,
+    pub frames: Vec<GpuFrame>,
+    pub val: Vec<GpuFrame>,
+    pub extent: f32,
+    time_interval: f32,
+    time_noise: bool,
+    /// Iterations completed.
+    pub iteration: u32,
+}
+
+impl<'g> Trainer<'g> {
+    /// Allocates everything for `cfg.densify.budget` Gaussians and initialises them from the
+    /// dataset's points. Fails with a clear error before any training on a bad dataset.
+    pub fn new(gpu: &'g Gpu, cfg: &TrainConfig, data: &Dataset) -> Result<Self> {
+        cfg.validate()?;
+        if data.train.is_empty() {
+            return Err(Error::Invalid(format!(
+                "{}: the dataset has no training frames",
+                data.root.display()
+            )));
+        }
+        let (w, h) = (data.train[0].camera.width, data.train[0].camera.height);
+        if let Some(f) = data
+            .frames()
+            .find(|f| (f.camera.width, f.camera.height) != (w, h))
+        {
+            return Err(Error::Invalid(format!(
+                "{}: frame {} is {}×{}, the first training frame {w}×{h}: all frames must share one size",
+                data.root.display(),
+                f.id,
+                f.camera.width,
+                f.camera.height
+            )));
+        }
+        let blender = matches!(data.format, crate::data::Format::Blender);
+        let base = if blender {
+            MlpConfig::synthetic()
+        } else {
+            MlpConfig::real()
+        };
+        let time = match base.time {
+            TimeEncoding::TimeNet { freqs, out, .. } => TimeEncoding::TimeNet {
+                freqs,
+                hidden: cfg.mlp_width,
+                out,
+            },
+            t => t,
+        };
+        let mlp_cfg = MlpConfig {
+            depth: cfg.mlp_depth,
+            width: cfg.mlp_width,
+            skip: (cfg.mlp_depth >= 3)
+                .then_some(cfg.mlp_depth / 2)
+                .filter(|&s| s + 1 < cfg.mlp_depth),
+            x_freqs: base.x_freqs,
+            time,
+        };
+        let near = data.near_far.map_or(0.01, |(n, _)| (0.5 * n).max(1e-3));
+        let frames = data
+            .train
+            .iter()
+            .map(|f| upload_frame(gpu, f, near))
+            .collect::<Result<Vec<_>>>()?;
+        let val = data
+            .val
+            .iter()
+            .map(|f| upload_frame(gpu, f, near))
+            .collect::<Result<Vec<_>>>()?;
+
+        let points: Vec<[f32; 3]> = data.points.positions.iter().map(|p| p.to_array()).collect();
+        let mut host =
+            HostGaussians::from_points(&points, data.points.colors.as_deref(), cfg.sh_degree)?;
+        let budget = cfg.densify.budget;
+        if host.len() > budget as usize {
+            // Keep an even subsample: the budget bounds every buffer.
+            let step = host.len() as f64 / budget as f64;
+            let keep: Vec<usize> = (0..budget as usize)
+                .map(|i| (i as f64 * step) as usize)
+                .collect();
+            host = subsample(&host, &keep);
+        }
+        let layout = GaussianLayout::new(budget, cfg.sh_degree);
+        let floats = layout.total_floats() * 4;
+        let mk = |name: &str| gpu.buffer(name, floats);
+        let params = mk("gaussian params")?;
+        host.upload(gpu, &layout, &params)?;
+        let m = mk("gaussian adam m")?;
+        let v = mk("gaussian adam v")?;
+        let mut rec = Recorder::new(gpu)?;
+        rec.fill(m.all(), 0);
+        rec.fill(v.all(), 0);
+        rec.finish()?;
+
+        let mlp = Mlp::new(gpu, &mlp_cfg)?;
+        let mut mlp_init = mlp.layout.init_params(cfg.seed);
+        if cfg.zero_deform_head {
+            // D starts at exactly 0, continuing the warm-up's static model instead of jolting
+            // every Gaussian by the random head (PyTorch-init displacements ~0.1–0.5 scene units,
+            // and ds ≫ exp(s) inflates every Gaussian). The head still gets gradients at once.
+            let h = mlp.layout.head();
+            mlp_init[h.w_off..h.w_off + h.fan_in * h.fan_out].fill(0.0);
+            mlp_init[h.b_off..h.b_off + h.fan_out].fill(0.0);
+        }
+        let mlp_params = gpu.buffer_from("mlp params", &mlp_init)?;
+        let zeros = vec![0f32; mlp_init.len()];
+        let cap = budget as u64;
+        let raster = Rasterizer::new(gpu)?;
+        let size = RasterSize {
+            max_gaussians: budget,
+            width: w,
+            height: h,
+            sh_coeffs: layout.sh_coeffs,
+            feature_dims: 0,
+            isect_capacity: (4 * host.len() as u32).max(1 << 16),
+        };
+        let raster_bufs = raster.buffers(gpu, &size)?;
+        let loss = PhotometricLoss::new(gpu)?;
+        let loss_bufs = loss.buffers(gpu, w, h)?;
+        let densifier = Densifier::new(gpu)?;
+        let densify_bufs = densifier.buffers(gpu, budget)?;
+        let n = host.len() as u32;
+        let time_noise = cfg.time_noise.unwrap_or(!blender);
+        let distinct_times = {
+            let mut t: Vec<u32> = data.train.iter().map(|f| f.time.to_bits()).collect();
+            t.sort_unstable();
+            t.dedup();
+            t.len().max(1)
+        };
+        Ok(Trainer {
+            gpu,
+            cfg: cfg.clone(),
+            mlp_cfg,
+            deform: DeformApply::new(gpu)?,
+            adam: Adam::new(gpu)?,
+            next: [
+                mk("gaussian params next")?,
+                mk("gaussian adam m next")?,
+                mk("gaussian adam v next")?,
+            ],
+            grads: mk("gaussian grads")?,
+            params,
+            m,
+            v,
+            layout,
+            n,
+            densify_bufs,
+            densifier,
+            mlp_grads: gpu.buffer_from("mlp grads", &zeros)?,
+            mlp_m: gpu.buffer_from("mlp adam m", &zeros)?,
+            mlp_v: gpu.buffer_from("mlp adam v", &zeros)?,
+            mlp_bufs: mlp.buffers(gpu, budget)?,
+            mlp_params,
+            mlp,
+            drawn: [
+                gpu.buffer("drawn means", cap * 12)?,
+                gpu.buffer("drawn scales", cap * 12)?,
+                gpu.buffer("drawn quats", cap * 16)?,
+            ],
+            d_drawn_dummy: gpu.buffer("unused binding", 16)?,
+            deform_out: gpu.buffer("deformation", cap * 40)?,
+            d_deform: gpu.buffer("deformation grads", cap * 40)?,
+            raster,
+            raster_bufs,
+            loss,
+            loss_bufs,
+            d_render: gpu.buffer("d render", (w * h) as u64 * 16)?,
+            zero_depth: gpu.buffer_from("zero depth grads", &vec![0f32; (w * h) as usize])?,
+            step_flags: gpu.host_buffer("step flags", 16)?,
+            frames,
+            val,
+            extent: camera_extent(&data.train),
+            time_interval: 1.0 / distinct_times as f32,
+            time_noise,
+            iteration: 0,
+        })
+    }
+
+    fn canonical(&self) -> Canonical<'_> {
+        let l = &self.layout;
+        Canonical {
+            means: l.slice(&self.params, Section::Means, self.n),
+            log_scales: l.slice(&self.params, Section::LogScales, self.n),
+            quats: l.slice(&self.params, Section::Quats, self.n),
+        }
+    }
+
+    fn drawn(&self) -> Drawn<'_> {
+        Drawn {
+            means: self.drawn[0].all(),
+            scales: self.drawn[1].all(),
+            quats: self.drawn[2].all(),
+        }
+    }
+
+    /// Whether the deformation network is active at 1-based `iteration`.
+    pub fn deform_active(&self, iteration: u32) -> bool {
+        iteration > self.cfg.warm_up
+    }
+
+    fn sh_degree_at(&self, iteration: u32) -> u32 {
+        self.cfg
+            .sh_degree
+            .min((iteration.saturating_sub(1)) / self.cfg.sh_interval)
+    }
+
+    /// Records the deformed Gaussians at time `t` into `self.drawn` (D ≡ 0 when inactive).
+    fn record_deform(&self, rec: &mut Recorder<'_>, t: f32, active: bool) {
+        if active {
+            let means = self.layout.slice(&self.params, Section::Means, self.n);
+            self.mlp.forward(
+                rec,
+                &self.mlp_bufs,
+                self.n,
+                means,
+                MlpTime::Batch(t),
+                self.mlp_params.all(),
+                self.deform_out.all(),
+            );
+        }
+        let d = active.then(|| self.deform_out.all());
+        self.deform.forward(
+            rec,
+            self.n,
+            &self.canonical(),
+            d,
+            self.d_drawn_dummy.all(),
+            &self.drawn(),
+        );
+    }
+
+    /// One training iteration. Returns the loss values when `want_values` (read after the
+    /// submit, never mid-step). An iteration whose tile intersections overflowed is discarded
+    /// on the GPU (the optimiser skips it) and re-run with grown buffers.
+    pub fn step(&mut self, want_values: bool, timed: bool) -> Result<Option<StepLog>> {
+        let it = self.iteration + 1;
+        let fi = frame_for_iteration(self.cfg.seed, it, self.frames.len());
+        let active = self.deform_active(it);
+        let mut t = self.frames[fi].time;
+        if self.time_noise && active {
+            // Deformable-3DGS AST: N(0,1) · (1 / frames) · a decaying factor.
+            let (u1, u2) = (
+                hash_uniform(self.cfg.seed, it as u64, 1),
+                hash_uniform(self.cfg.seed, it as u64, 2),
+            );
+            let z = (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos();
+            let decay = ExpLr {
+                lr_init: 0.1,
+                lr_final: 1e-15,
+                lr_delay_steps: 0,
+                lr_delay_mult: 0.01,
+                max_steps: 20_000,
+            };
+            t += (z * self.time_interval as f64 * decay.at(it as i64)) as f32;
+        }
+        let bg = match self.cfg.background {
+            Background::Black => [0.0; 3],
+            Background::White => [1.0; 3],
+            Background::Random => {
+                [1, 2, 3].map(|k| hash_uniform(self.cfg.seed ^ 0xb9, it as u64, k) as f32)
+            }
+        };
+        let opts = RenderOpts {
+            background: bg,
+            alpha_max: 0.99,
+        };
+        let sh_degree = self.sh_degree_at(it);
+        loop {
+            let frame = &self.frames[fi];
+            let mut rec = if timed {
+                Recorder::timed(self.gpu)?
+            } else {
+                Recorder::new(self.gpu)?
+            };
+            rec.set_zone("deform");
+            self.record_deform(&mut rec, t, active);
+            rec.set_zone("raster");
+            let g = splat_inputs(&self.layout, &self.params, &self.drawn, self.n, sh_degree);
+            self.raster
+                .forward(&mut rec, &self.raster_bufs, &frame.camera, &g, &opts);
+            rec.set_zone("loss");
+            self.loss.record(
+                &mut rec,
+                &mut self.loss_bufs,
+                self.raster_bufs.out_rgba.all(),
+                frame.target.all(),
+                self.d_render.all(),
+                self.cfg.lambda_ssim,
+            );
+            rec.set_zone("raster bwd");
+            let d = OutputGrads {
+                rgba: self.d_render.all(),
+                depth: self.zero_depth.all(),
+                features: None,
+            };
+            self.raster
+                .backward(&mut rec, &self.raster_bufs, &frame.camera, &g, &opts, &d);
+            rec.set_zone("deform bwd");
+            self.record_backward_to_params(&mut rec, active);
+            rec.set_zone("densify stats");
+            if it <= self.cfg.densify.until {
+                // (An overflowed, discarded step still adds its statistics once more; densification
+                // reads averages, so one repeated view among hundreds is harmless.)
+                self.densifier.record_stats(
+                    &mut rec,
+                    &self.densify_bufs,
+                    &self.raster_bufs,
+                    self.n,
+                );
+            }
+            rec.set_zone("adam");
+            self.record_adam(&mut rec, it, active);
+            rec.copy(
+                self.raster_bufs.overflow_flag(),
+                self.step_flags.slice(0, 8),
+            );
+            let timings = rec.finish()?;
+            let flags: Vec<u32> = self.step_flags.read_mapped();
+            if flags[0] != 0 {
+                let grown = flags[1].saturating_add(flags[1] / 4).max(flags[1]);
+                self.raster_bufs = self.raster.buffers(
+                    self.gpu,
+                    &RasterSize {
+                        isect_capacity: grown,
+                        ..self.raster_bufs.size()
+                    },
+                )?;
+                continue;
+            }
+            self.iteration = it;
+            self.densify_if_due(it)?;
+            return Ok(if want_values {
+                Some(StepLog {
+                    iteration: it,
+                    loss: self.loss_bufs.values(self.gpu)?,
+                    num_gaussians: self.n,
+                    timings,
+                })
+            } else {
+                None
+            });
+        }
+    }
+
+    /// Rasteriser gradients → canonical parameter gradients (and MLP output gradients, then
+    /// the MLP's weight gradients when the deformation is active).
+    fn record_backward_to_params(&self, rec: &mut Recorder<'_>, active: bool) {
+        let l = &self.layout;
+        let rb = &self.raster_bufs;
+        let d_drawn = Drawn {
+            means: rb.d_means.all(),
+            scales: rb.d_scales.all(),
+            quats: rb.d_quats.all(),
+        };
+        let grads = Canonical {
+            means: l.slice(&self.grads, Section::Means, self.n),
+            log_scales: l.slice(&self.grads, Section::LogScales, self.n),
+            quats: l.slice(&self.grads, Section::Quats, self.n),
+        };
+        let dd = active.then(|| self.d_deform.all());
+        self.deform.backward(
+            rec,
+            self.n,
+            &self.canonical(),
+            &d_drawn,
+            &grads,
+            dd,
+            self.d_drawn_dummy.all(),
+        );
+        if self.n > 0 {
+            let n = self.n as u64;
+            rec.copy(
+                rb.d_opacity_logits.slice(0, n * 4),
+                l.slice(&self.grads, Section::Opacity, self.n),
+            );
+            rec.copy(
+                rb.d_sh_dc.slice(0, n * 12),
+                l.slice(&self.grads, Section::ShDc, self.n),
+            );
+            if l.sh_coeffs > 1 {
+                let bytes = n * 4 * l.row_len(Section::ShRest) as u64;
+                rec.copy(
+                    rb.d_sh_rest.slice(0, bytes),
+                    l.slice(&self.grads, Section::ShRest, self.n),
+                );
+            }
+        }
+        if active {
+            rec.set_zone("mlp bwd");
+            self.mlp.backward(
+                rec,
+                &self.mlp_bufs,
+                self.n,
+                self.mlp_params.all(),
+                self.d_deform.all(),
+                self.mlp_grads.all(),
+                false,
+            );
+        }
+    }
+
+    fn record_adam(&self, rec: &mut Recorder<'_>, it: u32, active: bool) {
+        let lr = &self.cfg.lr;
+        let l = &self.layout;
+        let pos = ExpLr {
+            lr_init: lr.position_init * self.extent as f64,
+            lr_final: lr.position_final * self.extent as f64,
+            lr_delay_steps: 0,
+            lr_delay_mult: lr.position_delay_mult,
+            max_steps: self.cfg.iterations,
+        };
+        let group = |s: Section, lr: f64| AdamGroup {
+            first: l.offset(s) as u32,
+            count: self.n * l.row_len(s),
+            lr: lr as f32,
+            mask: None,
+        };
+        let mut groups = vec![
+            group(Section::Means, pos.at(it as i64)),
+            group(Section::LogScales, lr.scaling),
+            group(Section::Quats, lr.rotation),
+            group(Section::Opacity, lr.opacity),
+            group(Section::ShDc, lr.feature),
+        ];
+        if l.sh_coeffs > 1 {
+            groups.push(group(Section::ShRest, lr.feature / lr.feature_rest_div));
+        }
+        groups.retain(|g| g.count > 0);
+        let flag = self.raster_bufs.overflow_flag();
+        let skip = flag.buf.slice(flag.offset, 4);
+        let bufs = AdamBuffers {
+            params: self.params.all(),
+            grads: self.grads.all(),
+            m: self.m.all(),
+            v: self.v.all(),
+        };
+        let h = AdamHyper::default();
+        self.adam.record_guarded(rec, bufs, &groups, &h, it, skip);
+        if active {
+            let dl = ExpLr {
+                lr_init: lr.deform_init,
+                lr_final: lr.deform_final,
+                lr_delay_steps: 0,
+                lr_delay_mult: lr.position_delay_mult,
+                max_steps: self.cfg.iterations,
+            };
+            let total = self.mlp.layout.total as u32;
+            let g = [AdamGroup {
+                first: 0,
+                count: total,
+                lr: dl.at(it as i64) as f32,
+                mask: None,
+            }];
+            let b = AdamBuffers {
+                params: self.mlp_params.all(),
+                grads: self.mlp_grads.all(),
+                m: self.mlp_m.all(),
+                v: self.mlp_v.all(),
+            };
+            // The MLP's own step count starts after the warm-up (its bias correction too).
+            self.adam
+                .record_guarded(rec, b, &g, &h, it - self.cfg.warm_up, skip);
+        }
+    }
+}
+
+impl Trainer<'_> {
+    /// 3DGS density control at its cadence: densify every `interval` iterations after `from`
+    /// up to `until`, opacity reset every `opacity_reset_interval`. Reads the new count back:
+    /// this runs every hundred steps, outside a step.
+    fn densify_if_due(&mut self, it: u32) -> Result<()> {
+        let d = self.cfg.densify;
+        if it > d.until {
+            return Ok(());
+        }
+        if it > d.from && it % d.interval == 0 {
+            let mut s = DensifySettings::new(self.extent, d.budget);
+            s.grad_threshold = d.grad_threshold;
+            s.percent_dense = d.percent_dense;
+            s.min_opacity = d.min_opacity;
+            s.max_screen_size = if it > d.opacity_reset_interval {
+                d.max_screen_size
+            } else {
+                0.0
+            };
+            s.seed = self.cfg.seed as u32;
+            s.iteration = it;
+            let mut rec = Recorder::new(self.gpu)?;
+            let src = GaussianBuffers {
+                layout: &self.layout,
+                params: &self.params,
+                m: &self.m,
+                v: &self.v,
+            };
+            let dst = GaussianBuffers {
+                layout: &self.layout,
+                params: &self.next[0],
+                m: &self.next[1],
+                v: &self.next[2],
+            };
+            self.densifier
+                .record_densify(&mut rec, &self.densify_bufs, src, dst, self.n, &s)?;
+            rec.finish()?;
+            self.n = self.densify_bufs.read_count(self.gpu)?;
+            std::mem::swap(&mut self.params, &mut self.next[0]);
+            std::mem::swap(&mut self.m, &mut self.next[1]);
+            std::mem::swap(&mut self.v, &mut self.next[2]);
+        }
+        if it % d.opacity_reset_interval == 0 {
+            let mut rec = Recorder::new(self.gpu)?;
+            let g = GaussianBuffers {
+                layout: &self.layout,
+                params: &self.params,
+                m: &self.m,
+                v: &self.v,
+            };
+            self.densifier.record_opacity_reset(&mut rec, g, self.n);
+            rec.finish()?;
+        }
+        Ok(())
+    }
+
+    /// Renders `frame`'s view at `time` with the current model into `self.raster_bufs.out_rgba`
+    /// (growing the intersection buffers if needed).
+    pub fn render(&mut self, camera: &Camera, time: f32, background: [f32; 3]) -> Result<()> {
+        let active = self.deform_active(self.iteration.max(1));
+        let mut rec = Recorder::new(self.gpu)?;
+        self.record_deform(&mut rec, time, active);
+        rec.finish()?;
+        let deg = self.sh_degree_at(self.iteration.max(1));
+        let g = splat_inputs(&self.layout, &self.params, &self.drawn, self.n, deg);
+        let opts = RenderOpts {
+            background,
+            alpha_max: 0.99,
+        };
+        self.raster
+            .render_checked(self.gpu, &mut self.raster_bufs, camera, &g, &opts)
+    }
+
+    /// PSNR / SSIM / L1 of every validation frame (black background), optionally writing
+    /// `render | ground truth` PNGs into `png_dir`.
+    pub fn evaluate(&mut self, png_dir: Option<&Path>) -> Result<Vec<(String, LossValues)>> {
+        let mut out = Vec::new();
+        for i in 0..self.val.len() {
+            let (cam, time, id) = (self.val[i].camera, self.val[i].time, self.val[i].id.clone());
+            self.render(&cam, time, [0.0; 3])?;
+            let mut rec = Recorder::new(self.gpu)?;
+            self.loss.record(
+                &mut rec,
+                &mut self.loss_bufs,
+                self.raster_bufs.out_rgba.all(),
+                self.val[i].target.all(),
+                self.d_render.all(),
+                self.cfg.lambda_ssim,
+            );
+            rec.finish()?;
+            out.push((id.clone(), self.loss_bufs.values(self.gpu)?));
+            if let Some(dir) = png_dir {
+                let render: Vec<[f32; 4]> = self.gpu.read(
+                    self.raster_bufs
+                        .out_rgba
+                        .elems::<[f32; 4]>(0, (cam.width * cam.height) as u64),
+                )?;
+                let gt: Vec<[f32; 4]> = self.gpu.read(self.val[i].target.all())?;
+                save_side_by_side(
+                    &dir.join(format!("{:03}_{}.png", i, sanitize(&id))),
+                    cam.width,
+                    cam.height,
+                    &[&render, &gt],
+                )?;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Canonical Gaussians on the host (rows 0..n).
+    pub fn gaussians(&self) -> Result<HostGaussians> {
+        HostGaussians::download(self.gpu, &self.layout, &self.params, self.n)
+    }
+
+    pub fn checkpoint(&self) -> Result<Checkpoint> {
+        let rd =
+            |b: &Buffer| -> Result<Vec<f32>> { self.gpu.read(b.elems::<f32>(0, self.n as u64)) };
+        let db = &self.densify_bufs;
+        Ok(Checkpoint {
+            iteration: self.iteration,
+            gaussians: self.gaussians()?,
+            gauss_m: HostGaussians::download(self.gpu, &self.layout, &self.m, self.n)?,
+            gauss_v: HostGaussians::download(self.gpu, &self.layout, &self.v, self.n)?,
+            densify_stats: [rd(&db.grad_accum)?, rd(&db.denom)?, rd(&db.max_radii)?],
+            mlp_params: self.gpu.read(self.mlp_params.all())?,
+            mlp_m: self.gpu.read(self.mlp_m.all())?,
+            mlp_v: self.gpu.read(self.mlp_v.all())?,
+        })
+    }
+
+    /// Restores a checkpoint written by a run with the same configuration.
+    pub fn restore(&mut self, c: &Checkpoint) -> Result<()> {
+        if c.mlp_params.len() != self.mlp.layout.total
+            || c.gaussians.sh_coeffs != self.layout.sh_coeffs
+        {
+            return Err(Error::Invalid(
+                "checkpoint does not match this configuration (MLP size or SH degree differ); use the run's config.toml".into(),
+            ));
+        }
+        if c.gaussians.len() > self.layout.capacity as usize {
+            return Err(Error::Capacity {
+                what: "Gaussian budget (checkpoint)",
+                capacity: self.layout.capacity as u64,
+                asked: c.gaussians.len() as u64,
+            });
+        }
+        c.gaussians.upload(self.gpu, &self.layout, &self.params)?;
+        c.gauss_m.upload(self.gpu, &self.layout, &self.m)?;
+        c.gauss_v.upload(self.gpu, &self.layout, &self.v)?;
+        let db = &self.densify_bufs;
+        for (b, v) in [&db.grad_accum, &db.denom, &db.max_radii]
+            .iter()
+            .zip(&c.densify_stats)
+        {
+            self.gpu.upload(b.all(), v)?;
+        }
+        self.gpu.upload(self.mlp_params.all(), &c.mlp_params)?;
+        self.gpu.upload(self.mlp_m.all(), &c.mlp_m)?;
+        self.gpu.upload(self.mlp_v.all(), &c.mlp_v)?;
+        self.n = c.gaussians.len() as u32;
+        self.iteration = c.iteration;
+        Ok(())
+    }
+}
+
+/// What the rasteriser reads of the model: drawn (deformed) geometry, opacity and SH sections.
+fn splat_inputs<'a>(
+    l: &GaussianLayout,
+    params: &'a Buffer,
+    drawn: &'a [Buffer; 3],
+    n: u32,
+    sh_degree: u32,
+) -> SplatInputs<'a> {
+    SplatInputs {
+        n,
+        means: drawn[0].all(),
+        scales: drawn[1].all(),
+        quats: drawn[2].all(),
+        opacity_logits: l.slice(params, Section::Opacity, n),
+        sh_dc: l.slice(params, Section::ShDc, n),
+        sh_rest: l.slice(params, Section::ShRest, n),
+        sh_coeffs: l.sh_coeffs,
+        sh_degree,
+        features: None,
+    }
+}
+
+fn sanitize(id: &str) -> String {
+    id.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Writes images (RGBA f32, alpha ignored) side by side as one 8-bit PNG.
+pub fn save_side_by_side(path: &Path, w: u32, h: u32, images: &[&[[f32; 4]]]) -> Result<()> {
+    let k = images.len() as u32;
+    let img = image::RgbImage::from_fn(w * k, h, |x, y| {
+        let p = images[(x / w) as usize][(y * w + x % w) as usize];
+        image::Rgb([0, 1, 2].map(|c| (p[c].clamp(0.0, 1.0) * 255.0).round() as u8))
+    });
+    if let Some(d) = path.parent() {
+        std::fs::create_dir_all(d).map_err(|source| Error::Io {
+            path: d.display().to_string(),
+            source,
+        })?;
+    }
+    img.save(path)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))
+}
+
+fn subsample(h: &HostGaussians, keep: &[usize]) -> HostGaussians {
+    let r = 3 * (h.sh_coeffs as usize - 1);
+    HostGaussians {
+        sh_coeffs: h.sh_coeffs,
+        means: keep.iter().map(|&i| h.means[i]).collect(),
+        log_scales: keep.iter().map(|&i| h.log_scales[i]).collect(),
+        quats: keep.iter().map(|&i| h.quats[i]).collect(),
+        opacity: keep.iter().map(|&i| h.opacity[i]).collect(),
+        sh_dc: keep.iter().map(|&i| h.sh_dc[i]).collect(),
+        sh_rest: keep
+            .iter()
+            .flat_map(|&i| h.sh_rest[i * r..(i + 1) * r].to_vec())
+            .collect(),
+    }
+}
