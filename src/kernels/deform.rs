@@ -82,6 +82,7 @@ impl DeformApply {
 
     /// Gradients wrt the canonical parameters (`grads`) and, when `d_deform` is given, wrt the
     /// MLP output [N,10], from the gradients wrt what was drawn (`d_drawn`).
+    #[allow(clippy::too_many_arguments)] // the stage's bindings, each one named
     pub fn backward(
         &self,
         rec: &mut Recorder<'_>,

@@ -34,7 +34,7 @@ pub struct TrainArgs {
     /// Continue from OUT/checkpoints/last.ckpt when it exists (same configuration).
     #[arg(long)]
     pub resume: bool,
-    /// Largest image side after loading, in pixels [preset: paper none, fast 160].
+    /// Largest image side after loading, in pixels; 0 = as stored [preset: paper 0, fast 160].
     #[arg(long)]
     pub max_resolution: Option<u32>,
     /// Highest SH degree, 0-3 [preset: paper 3, fast 1].
@@ -129,7 +129,7 @@ pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
         c.iterations = v;
         c.densify.until = c.densify.until.min(v);
     }
-    c.max_resolution = a.max_resolution.or(c.max_resolution);
+    c.max_resolution = a.max_resolution.unwrap_or(c.max_resolution);
     c.sh_degree = a.sh_degree.unwrap_or(c.sh_degree);
     c.mlp_width = a.mlp_width.unwrap_or(c.mlp_width);
     c.mlp_depth = a.mlp_depth.unwrap_or(c.mlp_depth);
@@ -167,7 +167,7 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
         _ => [0.0; 3],
     };
     let opts = LoadOptions {
-        max_size: cfg.max_resolution,
+        max_size: (cfg.max_resolution > 0).then_some(cfg.max_resolution),
         background: bg,
         seed: cfg.seed,
         ..LoadOptions::default()

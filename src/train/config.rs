@@ -92,8 +92,8 @@ pub struct TrainConfig {
     /// Highest SH degree (grown by one every `sh_interval` iterations).
     pub sh_degree: u32,
     pub sh_interval: u32,
-    /// Largest image side after loading (box-downscaled), `None` = as stored.
-    pub max_resolution: Option<u32>,
+    /// Largest image side after loading (box-downscaled); 0 = as stored.
+    pub max_resolution: u32,
     pub mlp_width: u32,
     pub mlp_depth: u32,
     /// Iterations with D ≡ 0 before the deformation network is trained.
@@ -103,8 +103,9 @@ pub struct TrainConfig {
     pub zero_deform_head: bool,
     pub lambda_ssim: f32,
     pub background: Background,
-    /// Time noise (AST) of Deformable-3DGS; `None` = on for real captures, off for synthetic.
-    pub time_noise: Option<bool>,
+    /// Time noise (AST) of Deformable-3DGS: "auto" (on for real captures, off for synthetic
+    /// scenes), "on" or "off".
+    pub time_noise: TimeNoise,
     pub lr: LearningRates,
     pub densify: DensifyConfig,
     pub log_interval: u32,
@@ -117,6 +118,14 @@ impl Default for TrainConfig {
     fn default() -> Self {
         TrainConfig::paper()
     }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TimeNoise {
+    Auto,
+    On,
+    Off,
 }
 
 /// Named starting points for the configuration.
@@ -136,14 +145,14 @@ impl TrainConfig {
             seed: 0,
             sh_degree: 3,
             sh_interval: 1000,
-            max_resolution: None,
+            max_resolution: 0,
             mlp_width: 256,
             mlp_depth: 8,
             warm_up: 3000,
             zero_deform_head: true,
             lambda_ssim: 0.2,
             background: Background::Black,
-            time_noise: None,
+            time_noise: TimeNoise::Auto,
             lr: LearningRates::default(),
             densify: DensifyConfig::default(),
             log_interval: 100,
@@ -157,7 +166,7 @@ impl TrainConfig {
             iterations: 1500,
             sh_degree: 1,
             sh_interval: 500,
-            max_resolution: Some(160),
+            max_resolution: 160,
             mlp_width: 64,
             mlp_depth: 4,
             warm_up: 300,

@@ -87,6 +87,39 @@ pub fn camera_extent(frames: &[Frame]) -> f32 {
     1.1 * r.max(1e-3)
 }
 
+/// Mean colour of each point over up to 8 evenly spaced views it projects into (grey if none).
+pub fn colors_from_views(points: &[[f32; 3]], frames: &[Frame]) -> Vec<[f32; 3]> {
+    let k = frames.len().clamp(1, 8);
+    let views: Vec<&Frame> = (0..k)
+        .filter_map(|i| frames.get(i * frames.len() / k))
+        .collect();
+    points
+        .iter()
+        .map(|p| {
+            let (mut sum, mut n) = ([0.0f32; 3], 0);
+            for f in &views {
+                let Some((px, _)) = f.camera.project(glam::Vec3::from_array(*p)) else {
+                    continue;
+                };
+                if !f.camera.contains(px) || f.image.data.is_empty() {
+                    continue;
+                }
+                let (x, y) = (px.x as usize, px.y as usize);
+                let o = 3 * (y * f.image.width as usize + x);
+                for (c, sc) in sum.iter_mut().enumerate() {
+                    *sc += f.image.data[o + c];
+                }
+                n += 1;
+            }
+            if n == 0 {
+                [0.5; 3]
+            } else {
+                sum.map(|s| s / n as f32)
+            }
+        })
+        .collect()
+}
+
 /// SplitMix-style hash → uniform in (0, 1), for per-iteration choices that must not depend on
 /// how many random numbers were drawn before (so a resumed run makes the same choices).
 fn hash_uniform(seed: u64, a: u64, b: u64) -> f64 {
@@ -282,7 +315,11 @@ impl<'g> Trainer<'g> {
         let densifier = Densifier::new(gpu)?;
         let densify_bufs = densifier.buffers(gpu, budget)?;
         let n = host.len() as u32;
-        let time_noise = cfg.time_noise.unwrap_or(!blender);
+        let time_noise = match cfg.time_noise {
+            config::TimeNoise::Auto => !blender,
+            config::TimeNoise::On => true,
+            config::TimeNoise::Off => false,
+        };
         let distinct_times = {
             let mut t: Vec<u32> = data.train.iter().map(|f| f.time.to_bits()).collect();
             t.sort_unstable();

@@ -1,0 +1,207 @@
+//! Training end to end on lavapipe (short), configuration, checkpoints and exports, bad input.
+
+use dispflow_vk::data::{self, LoadOptions};
+use dispflow_vk::model::gaussians::HostGaussians;
+use dispflow_vk::testing;
+use dispflow_vk::train::checkpoint::{read_ply, write_ply, Checkpoint};
+use dispflow_vk::train::cli::{resolve_config, TrainArgs};
+use dispflow_vk::train::config::TrainConfig;
+use dispflow_vk::train::Trainer;
+use train_common::{tiny_config, tiny_scene};
+
+mod train_common;
+
+fn args() -> TrainArgs {
+    TrainArgs {
+        data: None,
+        out: None,
+        preset: None,
+        config: None,
+        iterations: None,
+        resume: false,
+        max_resolution: None,
+        sh_degree: None,
+        mlp_width: None,
+        mlp_depth: None,
+        budget: None,
+        background: None,
+        seed: None,
+        verbose: false,
+    }
+}
+
+#[test]
+fn short_run_raises_test_psnr() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tiny_scene(tmp.path());
+    let ds = data::load(
+        &dir,
+        &LoadOptions {
+            progress: false,
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap();
+    let gpu = testing::gpu();
+    let cfg = tiny_config(250);
+    let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
+    let n0 = tr.n;
+    let before: f64 = tr
+        .evaluate(None)
+        .unwrap()
+        .iter()
+        .map(|v| v.1.psnr)
+        .sum::<f64>()
+        / ds.val.len() as f64;
+    let mut last = None;
+    while tr.iteration < cfg.iterations {
+        if let Some(l) = tr.step(tr.iteration + 1 == cfg.iterations, false).unwrap() {
+            last = Some(l);
+        }
+    }
+    let after: f64 = tr
+        .evaluate(None)
+        .unwrap()
+        .iter()
+        .map(|v| v.1.psnr)
+        .sum::<f64>()
+        / ds.val.len() as f64;
+    let l = last.unwrap();
+    eprintln!(
+        "PSNR {before:.2} -> {after:.2} dB; train loss {:.4}; Gaussians {n0} -> {}",
+        l.loss.loss, tr.n
+    );
+    assert!(l.loss.loss.is_finite());
+    assert!(
+        after > before + 1.5,
+        "test PSNR only went from {before:.2} to {after:.2} dB"
+    );
+    assert_ne!(tr.n, n0, "densification ran (the count changed)");
+    let g = tr.gaussians().unwrap();
+    assert!(g
+        .means
+        .iter()
+        .flatten()
+        .chain(g.log_scales.iter().flatten())
+        .all(|v| v.is_finite()));
+}
+
+#[test]
+fn checkpoint_round_trip_and_corruption() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut c = Checkpoint {
+        iteration: 7,
+        ..Default::default()
+    };
+    c.gaussians = HostGaussians::from_points(
+        &[[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 2.0]],
+        None,
+        2,
+    )
+    .unwrap();
+    c.gauss_m = c.gaussians.clone();
+    c.gauss_v = c.gaussians.clone();
+    c.densify_stats = [vec![1.0; 3], vec![2.0; 3], vec![3.0; 3]];
+    c.mlp_params = vec![0.5; 10];
+    c.mlp_m = vec![0.25; 10];
+    c.mlp_v = vec![0.125; 10];
+    let p = tmp.path().join("last.ckpt");
+    c.save(&p).unwrap();
+    assert_eq!(Checkpoint::load(&p).unwrap(), c);
+    assert!(
+        !p.with_extension("tmp").exists(),
+        "the temp file was renamed away"
+    );
+    let bytes = std::fs::read(&p).unwrap();
+    for cut in [0, 7, 20, bytes.len() / 2, bytes.len() - 1] {
+        std::fs::write(&p, &bytes[..cut]).unwrap();
+        let e = Checkpoint::load(&p).unwrap_err().to_string();
+        assert!(e.contains("last.ckpt"), "error names the file: {e}");
+    }
+    let mut garbled = bytes.clone();
+    garbled[20] ^= 0xff;
+    std::fs::write(&p, &garbled).unwrap();
+    assert!(Checkpoint::load(&p).is_err());
+}
+
+#[test]
+fn ply_round_trip() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut g = HostGaussians::from_points(
+        &[[0.1, 0.2, 0.3], [1.0, 2.0, 3.0]],
+        Some(&[[0.2, 0.4, 0.6], [1.0, 0.0, 0.5]]),
+        3,
+    )
+    .unwrap();
+    for (i, v) in g.sh_rest.iter_mut().enumerate() {
+        *v = i as f32 * 0.01;
+    }
+    g.quats[1] = [0.5, 0.5, -0.5, 0.5];
+    let p = tmp.path().join("point_cloud.ply");
+    write_ply(&p, &g).unwrap();
+    assert_eq!(read_ply(&p).unwrap(), g);
+    let text = std::fs::read(&p).unwrap();
+    let header = String::from_utf8_lossy(
+        &text[..text.windows(10).position(|w| w == b"end_header").unwrap()],
+    )
+    .to_string();
+    assert!(
+        header.contains("property float f_rest_44") && header.contains("property float rot_3"),
+        "{header}"
+    );
+}
+
+#[test]
+fn config_rejects_unknown_fields_and_bad_values() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("c.toml");
+    std::fs::write(&p, "iterations = 10\n[densify]\nbudgget = 3\n").unwrap();
+    let e = TrainConfig::from_toml_over(&TrainConfig::fast(), &p)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("budgget") && e.contains("c.toml"), "{e}");
+    std::fs::write(&p, "sh_degree = 7\n").unwrap();
+    let e = TrainConfig::from_toml_over(&TrainConfig::fast(), &p)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("sh_degree"), "{e}");
+    std::fs::write(&p, "iterations = 'many'\n").unwrap();
+    assert!(TrainConfig::from_toml_over(&TrainConfig::fast(), &p).is_err());
+    // The written config.toml reads back to the same configuration.
+    let c = TrainConfig::paper();
+    std::fs::write(&p, c.to_toml()).unwrap();
+    assert_eq!(
+        TrainConfig::from_toml_over(&TrainConfig::fast(), &p).unwrap(),
+        c
+    );
+    // Flags override the preset.
+    let mut a = args();
+    a.iterations = Some(123);
+    a.mlp_width = Some(16);
+    let r = resolve_config(&a).unwrap();
+    assert_eq!((r.iterations, r.mlp_width, r.densify.until), (123, 16, 123));
+}
+
+#[test]
+fn bad_data_paths_give_clear_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut a = args();
+    a.data = Some(tmp.path().join("no-such-dataset"));
+    a.out = Some(tmp.path().join("out"));
+    let e = dispflow_vk::train::cli::run(&a).unwrap_err().to_string();
+    assert!(e.contains("no-such-dataset"), "{e}");
+    // A dataset with no training frames.
+    let dir = tiny_scene(tmp.path());
+    let ds = dir.join("dataset.json");
+    let mut j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&ds).unwrap()).unwrap();
+    j["train_ids"] = serde_json::json!([]);
+    std::fs::write(&ds, j.to_string()).unwrap();
+    a.data = Some(dir);
+    let e = dispflow_vk::train::cli::run(&a).unwrap_err().to_string();
+    assert!(e.contains("train"), "{e}");
+    assert!(
+        !tmp.path().join("out/metrics.json").exists(),
+        "no training on half-loaded data"
+    );
+}

@@ -1,0 +1,32 @@
+//! Shared by the training tests: a generated tiny scene and a configuration that trains it in
+//! seconds on lavapipe.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+use dispflow_vk::data::synthetic::{self, Preset as ScenePreset};
+use dispflow_vk::train::config::TrainConfig;
+
+pub fn tiny_scene(dir: &std::path::Path) -> PathBuf {
+    let d = dir.join("tiny");
+    synthetic::generate(ScenePreset::Tiny, 3, &d).unwrap();
+    d
+}
+
+/// A configuration that trains the tiny scene in seconds: small MLP, early warm-up end and
+/// densification inside the run.
+pub fn tiny_config(iterations: u32) -> TrainConfig {
+    let mut c = TrainConfig::fast();
+    c.iterations = iterations;
+    c.mlp_width = 16;
+    c.mlp_depth = 2;
+    c.warm_up = iterations / 2;
+    c.sh_degree = 1;
+    c.sh_interval = 100;
+    c.densify.from = 40;
+    c.densify.until = iterations;
+    c.densify.interval = 50;
+    c.densify.opacity_reset_interval = 10_000;
+    c.densify.budget = 8000;
+    c
+}
