@@ -66,6 +66,7 @@ fn main() {
     println!();
     println!("| config | impl | N | fwd ms | fwd Gauss/s | fwd GFLOP/s | % GEMM | fwd+bwd ms | fwd+bwd Gauss/s | fwd+bwd GFLOP/s | % GEMM | bytes/Gauss | err vs twin |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut notes = Vec::new();
     for name in env_list("DISPFLOW_MLP_CONFIGS", "synthetic") {
         let cfg = config(&name);
         for &n in &sizes {
@@ -78,6 +79,12 @@ fn main() {
                     }
                 };
                 let pct = |g: f64| 100.0 * g / peak.gemm_gflops;
+                let st: Vec<String> = row
+                    .stages
+                    .iter()
+                    .map(|(l, p)| format!("{l} {p:.0}%"))
+                    .collect();
+                notes.push(format!("{name} {imp:?} N={n}: {}", st.join(", ")));
                 let (tms, tgs, tgf, tp) = match (row.train_ms, row.train_gflops) {
                     (Some(ms), Some(g)) => (
                         format!("{ms:.1}"),
@@ -99,5 +106,10 @@ fn main() {
                 );
             }
         }
+    }
+    println!();
+    println!("GPU time per kernel (last timed run):");
+    for n in notes {
+        println!("- {n}");
     }
 }

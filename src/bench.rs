@@ -829,6 +829,8 @@ pub struct MlpRow {
     pub train_gflops: Option<f64>,
     pub bytes_per_gaussian: u64,
     pub verify_err: f64,
+    /// Share of GPU time per kernel (percent) in the last timed run (fwd+bwd when there is one).
+    pub stages: Vec<(String, f64)>,
 }
 
 /// Times one case: verify, then `reps` forward (and forward + backward) runs.
@@ -841,10 +843,27 @@ pub fn mlp_row(
     reps: usize,
 ) -> Result<MlpRow> {
     let case = MlpCase::new(gpu, cfg, n, imp)?;
+    // The verified forward doubles as the warm-up (pipelines are compiled at creation); at
+    // 10^5 Gaussians one lavapipe run takes a minute, so no further warm-up runs.
     let verify_err = case.verify(gpu)?;
-    let (fwd_ms, _) = measure(reps, || case.run_forward(gpu))?;
+    let mut stages = Vec::new();
+    let mut timed = |f: &dyn Fn() -> Result<Timings>| -> Result<f64> {
+        let mut v = Vec::new();
+        for _ in 0..reps.max(1) {
+            let t = f()?;
+            v.push(t.total_ms());
+            let total = t.total_ms().max(1e-12);
+            stages = t
+                .by_label()
+                .into_iter()
+                .map(|(l, ms)| (l, 100.0 * ms / total))
+                .collect();
+        }
+        Ok(median(v))
+    };
+    let fwd_ms = timed(&|| case.run_forward(gpu))?;
     let train_ms = if imp == MlpImpl::Layerwise {
-        Some(measure(reps, || Ok(case.run_train(gpu)?.unwrap_or_default()))?.0)
+        Some(timed(&|| Ok(case.run_train(gpu)?.unwrap_or_default()))?)
     } else {
         None
     };
@@ -860,5 +879,6 @@ pub fn mlp_row(
         train_gflops: train_ms.map(|t| fb / (t * 1e6)),
         bytes_per_gaussian: case.bytes_per_gaussian(),
         verify_err,
+        stages,
     })
 }

@@ -462,8 +462,9 @@ fn fused_forward_matches_twin_and_fp16_error_is_bounded() {
         (MlpConfig::real(), 1),
         (MlpConfig::synthetic(), 1024),
         (MlpConfig::real(), 1024),
-        (small(true), 65_537),
+        (small(true), 4096),
         (small(false), 100),
+        (small(false), 0),
     ]
     .into_iter()
     .enumerate()
@@ -501,4 +502,28 @@ fn fused_rejects_too_wide_configs() {
         .unwrap()
         .to_string();
     assert!(e.contains("width 512"), "{e}");
+}
+
+#[test]
+fn capacity_beyond_the_storage_buffer_range_is_a_clear_error() {
+    let gpu = testing::gpu();
+    let mlp = Mlp::new(&gpu, &MlpConfig::synthetic()).unwrap();
+    let too_many = (gpu.info.max_storage_buffer_range as u64 / (256 * 4) + 1).min(u32::MAX as u64);
+    if too_many >= u32::MAX as u64 {
+        eprintln!(
+            "{}: storage-buffer range allows every u32 capacity; nothing to check",
+            gpu.info.name
+        );
+        return;
+    }
+    let e = mlp
+        .buffers(&gpu, too_many as u32)
+        .err()
+        .expect("capacity error")
+        .to_string();
+    assert!(
+        e.contains("maxStorageBufferRange") && e.contains(&too_many.to_string()),
+        "{e}"
+    );
+    assert!(mlp.buffers(&gpu, 1000).is_ok());
 }

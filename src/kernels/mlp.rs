@@ -206,15 +206,17 @@ impl Mlp {
     }
 
     /// Allocates activations and scratch for up to `capacity` Gaussians. Each activation
-    /// tensor is one buffer bound whole, so `capacity · max(width, in_dims) · 4` must fit the
-    /// device's storage-buffer range (lavapipe 128 MiB: 131 072 Gaussians at width 256).
+    /// tensor is one buffer bound whole, so `capacity · max(width, in_dims, hidden) · 4` must
+    /// fit the device's storage-buffer range (lavapipe 128 MiB: 131 072 Gaussians at width
+    /// 256); larger batches are run in chunks by the caller.
     pub fn buffers(&self, gpu: &Gpu, capacity: u32) -> Result<MlpBuffers> {
         let cfg = self.cfg();
         let (w, ind, hid) = (cfg.width as u64, cfg.in_dims() as u64, self.hidden() as u64);
-        let widest = w.max(ind + w).max(hid);
+        // The widest per-Gaussian tensor bound as one storage buffer.
+        let widest = w.max(ind).max(hid);
         let range = gpu.info.max_storage_buffer_range as u64;
         let cap = capacity.max(1) as u64;
-        if cap * widest.max(w + ind) * 4 > range {
+        if cap * widest * 4 > range {
             return Err(Error::Capacity {
                 what: "MLP activations (one tensor must fit maxStorageBufferRange)",
                 capacity: range / (widest * 4),
@@ -425,7 +427,11 @@ impl Mlp {
             b.capacity
         );
         assert!(d_out.size >= n as u64 * 40);
-        assert!(grads.size >= self.layout.total as u64 * 4 && params.size >= grads.size);
+        let total = self.layout.total as u64 * 4;
+        assert!(
+            grads.size >= total && params.size >= total,
+            "grads {grads:?} or params {params:?} smaller than the layout"
+        );
         let (chunks, chunk_rows) = chunking(n);
         rec.set_zone("mlp bwd");
         // dW, db of one Linear whose input is [a | bb] and output gradient dz.
