@@ -224,4 +224,12 @@ struct OpacityResetParams {
     uint pad1;
 };
 
+// src/kernels/dispflow.rs — the displacement-flow motion term of DispFlow-GS.
+struct DispFlowParams {
+    uint n;           // Gaussians (displacement stages) or pixels (motion L1)
+    float weight;     // α_t of the motion term (motion L1)
+    uint pad0;
+    uint pad1;
+};
+
 #endif

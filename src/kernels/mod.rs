@@ -4,6 +4,7 @@
 pub mod adam;
 pub mod deform;
 pub mod densify;
+pub mod dispflow;
 pub mod loss;
 pub mod mlp;
 pub mod mlp_fused;
@@ -23,6 +24,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         };
     }
     vec![
+        layout!(dispflow::DispFlowParams, n, weight, pad0, pad1),
         layout!(deform::DeformParams, n, use_deform, pad0, pad1),
         layout!(
             densify::DensifyStatsParams,

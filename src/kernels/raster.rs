@@ -139,8 +139,9 @@ impl Default for RenderOpts {
 /// The Gaussians to render, already deformed: `means` [N,3], `scales` [N,3] (linear),
 /// `quats` [N,4] (w, x, y, z; unnormalised), `opacity_logits` [N], SH coefficients split in
 /// `sh_dc` [N,3] and `sh_rest` [N, sh_coeffs − 1, 3] (separate learning rates; `sh_rest` is
-/// not read when `sh_coeffs` is 1), and optionally `features` [N, feature_dims] blended with
-/// the same weights.
+/// not read when `sh_coeffs` is 1), and optionally `features` ([N, K] with its K, one of
+/// `FEATURE_DIMS` up to the buffers' `feature_dims`) blended with the same weights. Without
+/// features the plain blend variant runs: the extra channels cost nothing.
 #[derive(Clone, Copy, Debug)]
 pub struct SplatInputs<'a> {
     pub n: u32,
@@ -152,7 +153,14 @@ pub struct SplatInputs<'a> {
     pub sh_rest: BufSlice<'a>,
     pub sh_coeffs: u32,
     pub sh_degree: u32,
-    pub features: Option<BufSlice<'a>>,
+    pub features: Option<(BufSlice<'a>, u32)>,
+}
+
+impl SplatInputs<'_> {
+    /// Feature channels blended by this pass (0 without features).
+    pub fn feature_dims(&self) -> u32 {
+        self.features.map_or(0, |f| f.1)
+    }
 }
 
 /// Upstream gradients of the forward outputs: `rgba` [H·W,4], `depth` [H·W],
@@ -389,10 +397,11 @@ impl Rasterizer {
             "sh_degree {}",
             g.sh_degree
         );
-        assert_eq!(
-            g.features.is_some(),
-            b.feature_dims > 0,
-            "features given iff feature_dims > 0"
+        assert!(
+            g.feature_dims() <= b.feature_dims && FEATURE_DIMS.contains(&g.feature_dims()),
+            "{} feature channels with buffers for {}",
+            g.feature_dims(),
+            b.feature_dims
         );
     }
 
@@ -506,11 +515,11 @@ impl Rasterizer {
             b.final_t.all(),
             b.n_contrib.all(),
         ];
-        if let Some(f) = g.features {
+        if let Some((f, _)) = g.features {
             binds.extend([f, b.out_features.all()]);
         }
         rec.dispatch(
-            &self.blend_fwd[variant(b.feature_dims).unwrap()],
+            &self.blend_fwd[variant(g.feature_dims()).unwrap()],
             &bp,
             &binds,
             [tx.max(1), ty.max(1), 1],
@@ -531,8 +540,8 @@ impl Rasterizer {
         Self::check(b, cam, g);
         assert_eq!(
             d.features.is_some(),
-            b.feature_dims > 0,
-            "feature gradients given iff feature_dims > 0"
+            g.features.is_some(),
+            "feature gradients given iff features are"
         );
         let out = (passes(sort_bits(cam)) % 2) as usize;
         let bp = Self::blend_params(cam, g, o);
@@ -548,12 +557,12 @@ impl Rasterizer {
             d.depth,
             b.grad2d.all(),
         ];
-        if let (Some(f), Some(df)) = (g.features, d.features) {
+        if let (Some((f, _)), Some(df)) = (g.features, d.features) {
             rec.fill(b.d_features.all(), 0);
             binds.extend([f, df, b.d_features.all()]);
         }
         rec.dispatch(
-            &self.blend_bwd[variant(b.feature_dims).unwrap()],
+            &self.blend_bwd[variant(g.feature_dims()).unwrap()],
             &bp,
             &binds,
             [tx.max(1), ty.max(1), 1],

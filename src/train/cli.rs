@@ -28,7 +28,7 @@ pub struct TrainArgs {
     /// TOML file overriding fields of the preset (same names as the run's config.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Training iterations [preset: paper 20000, fast 1500].
+    /// Training iterations [preset: paper 20000, fast 1000].
     #[arg(long)]
     pub iterations: Option<u32>,
     /// Continue from OUT/checkpoints/last.ckpt when it exists (same configuration).
@@ -46,7 +46,7 @@ pub struct TrainArgs {
     /// Deformation MLP depth [preset: paper 8, fast 4].
     #[arg(long)]
     pub mlp_depth: Option<u32>,
-    /// Most Gaussians the run may hold [preset: paper 500000, fast 30000].
+    /// Most Gaussians the run may hold [preset: paper 500000, fast 20000].
     #[arg(long)]
     pub budget: Option<u32>,
     /// Background used in training [default: black].

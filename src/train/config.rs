@@ -134,7 +134,7 @@ pub enum TimeNoise {
 pub enum Preset {
     /// The paper's setting: 20 000 iterations, 8×256 MLP, warm-up 3000, densify 500–15 000.
     Paper,
-    /// Minutes on a CPU: 1500 iterations, 4×64 MLP, warm-up 300, densify 100–1000, SH degree 1.
+    /// Minutes on a CPU: 1000 iterations, 4×64 MLP, warm-up 300, densify 100–700, SH degree 1.
     Fast,
 }
 
@@ -163,7 +163,7 @@ impl TrainConfig {
 
     pub fn fast() -> Self {
         TrainConfig {
-            iterations: 1500,
+            iterations: 1000,
             sh_degree: 1,
             sh_interval: 500,
             max_resolution: 160,
@@ -172,10 +172,10 @@ impl TrainConfig {
             warm_up: 300,
             densify: DensifyConfig {
                 from: 100,
-                until: 1000,
+                until: 700,
                 interval: 100,
-                opacity_reset_interval: 600,
-                budget: 30_000,
+                opacity_reset_interval: 500,
+                budget: 20_000,
                 ..DensifyConfig::default()
             },
             log_interval: 50,

@@ -143,7 +143,7 @@ impl Uploaded {
             sh_rest: self.sh_rest.all(),
             sh_coeffs: self.sh_coeffs,
             sh_degree: self.sh_degree,
-            features: (self.feature_dims > 0).then(|| self.features.all()),
+            features: (self.feature_dims > 0).then(|| (self.features.all(), self.feature_dims)),
         }
     }
 }
