@@ -27,6 +27,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
+use super::raster::grid;
 use super::raster::RasterBuffers;
 use super::scan::{Count, PrefixSum, ScanScratch};
 use crate::error::{Error, Result};
@@ -255,13 +256,6 @@ impl DensifyBuffers {
         }
         gpu.read::<u32>(self.action.elems::<u32>(0, n as u64))
     }
-}
-
-/// Workgroups for one invocation per element with 256-wide workgroups (2D past 32768).
-fn grid(n: u32) -> [u32; 3] {
-    let groups = n.div_ceil(256);
-    let gx = groups.clamp(1, 32768);
-    [gx, groups.div_ceil(gx).max(1), 1]
 }
 
 /// The densify pipelines (stats, step, opacity reset).

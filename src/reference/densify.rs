@@ -170,28 +170,11 @@ pub fn split_normals(seed: u32, iteration: u32, i: u32, c: u32) -> [f64; 3] {
 fn quat_to_rot(q: [f32; 4]) -> [[f64; 3]; 3] {
     let q = q.map(|x| x as f64);
     let len = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    let [w, x, y, z] = if len > 1e-12 {
+    crate::reference::raster::quat_to_rot(if len > 1e-12 {
         q.map(|c| c / len)
     } else {
         [1.0, 0.0, 0.0, 0.0]
-    };
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
+    })
 }
 
 /// Mean of split child `c` of Gaussian `i`: `R(q̂)·(exp(log_scale) ⊙ z) + mean`, f64 inside.

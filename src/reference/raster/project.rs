@@ -33,8 +33,8 @@ fn transpose(a: &M3) -> M3 {
     t
 }
 
-/// Rotation matrix of a unit quaternion (w, x, y, z).
-fn quat_to_rot(q: [f64; 4]) -> M3 {
+/// Rotation matrix of a unit quaternion (w, x, y, z); `r[row][col]`.
+pub fn quat_to_rot(q: [f64; 4]) -> M3 {
     let [w, x, y, z] = q;
     [
         [
