@@ -66,7 +66,8 @@ pub struct Metrics {
     pub psnr: f64,
     pub ssim: f64,
     pub l1: f64,
-    pub initial_psnr: f64,
+    /// Test PSNR of the initial model (absent for a resumed run: it was measured by the first).
+    pub initial_psnr: Option<f64>,
     pub iterations: u32,
     pub num_gaussians: u32,
     /// Median wall-clock milliseconds per training step (submit + wait).
@@ -200,12 +201,16 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
         cfg.mlp_width,
         cfg.iterations
     );
-    let initial_psnr = mean(
-        &tr.evaluate(None)?
-            .iter()
-            .map(|v| v.1.psnr)
-            .collect::<Vec<_>>(),
-    );
+    let initial_psnr = if tr.iteration == 0 {
+        Some(mean(
+            &tr.evaluate(None)?
+                .iter()
+                .map(|v| v.1.psnr)
+                .collect::<Vec<_>>(),
+        ))
+    } else {
+        None
+    };
     let pb = indicatif::ProgressBar::new(cfg.iterations as u64);
     pb.set_style(
         indicatif::ProgressStyle::with_template(
@@ -293,9 +298,11 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
     let text = serde_json::to_string_pretty(&metrics).expect("metrics serialise");
     write_atomic(&out.join("metrics.json"), text.as_bytes())?;
     println!(
-        "test PSNR {:.2} dB (initial {:.2}), SSIM {:.4}, {} Gaussians, {:.1} ms/step; outputs in {}",
+        "test PSNR {:.2} dB (initial {}), SSIM {:.4}, {} Gaussians, {:.1} ms/step; outputs in {}",
         metrics.psnr,
-        metrics.initial_psnr,
+        metrics
+            .initial_psnr
+            .map_or("not measured: resumed".into(), |p| format!("{p:.2}")),
         metrics.ssim,
         metrics.num_gaussians,
         metrics.ms_per_step,
