@@ -232,4 +232,21 @@ struct DispFlowParams {
     uint pad1;
 };
 
+// src/kernels/flow.rs — TV-L1 optical flow stages (one struct for all; each stage says which
+// fields it reads). Offsets are in floats into the grey pyramid buffer.
+struct FlowParams {
+    uint width;         // this level (or the output level)
+    uint height;
+    uint src_width;     // downsample: finer level; upsample: coarser level
+    uint src_height;
+    uint off0;          // I0 plane (downsample: source I0)
+    uint off1;          // I1 plane (downsample: source I1)
+    uint off2;          // downsample: destination I0
+    uint off3;          // downsample: destination I1
+    float lambda_theta; // λ·θ: threshold of the data step
+    float theta;        // θ
+    float tau_theta;    // τ/θ: dual step
+    float pad0;
+};
+
 #endif

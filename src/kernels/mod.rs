@@ -5,6 +5,7 @@ pub mod adam;
 pub mod deform;
 pub mod densify;
 pub mod dispflow;
+pub mod flow;
 pub mod loss;
 pub mod mlp;
 pub mod mlp_fused;
@@ -69,6 +70,21 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             inv_count,
             pad1,
             pad2
+        ),
+        layout!(
+            flow::FlowParams,
+            width,
+            height,
+            src_width,
+            src_height,
+            off0,
+            off1,
+            off2,
+            off3,
+            lambda_theta,
+            theta,
+            tau_theta,
+            pad0
         ),
         layout!(scan::ScanParams, capacity, level, num_levels, pad),
         layout!(radix_sort::SortParams, capacity, shift, digit_mask, pad),

@@ -5,6 +5,7 @@ pub mod adam;
 pub mod deform;
 pub mod densify;
 pub mod dispflow;
+pub mod flow;
 pub mod loss;
 pub mod mlp;
 pub mod radix_sort;
