@@ -7,6 +7,7 @@ pub mod densify;
 pub mod loss;
 pub mod mlp;
 pub mod mlp_fused;
+pub mod motion;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;
@@ -192,6 +193,21 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             bc2,
             pad0,
             pad1
+        ),
+        layout!(
+            motion::MotionNormParams,
+            n,
+            channels,
+            mode,
+            groups,
+            groups_x,
+            eps,
+            q25_lo,
+            q50_lo,
+            q75_lo,
+            q25_frac,
+            q50_frac,
+            q75_frac
         ),
     ]
 }

@@ -6,6 +6,7 @@ pub mod deform;
 pub mod densify;
 pub mod loss;
 pub mod mlp;
+pub mod motion;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;
