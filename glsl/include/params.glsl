@@ -241,4 +241,12 @@ struct MotionNormParams {
     float q75_frac;
 };
 
+// src/kernels/metrics.rs — per-pixel passes of MMAP (keys, AP terms) and DRC.
+struct MetricsParams {
+    uint n;           // pixels (H·W)
+    uint groups_x;    // workgroups along x of the per-pixel grid
+    uint groups;      // partial-sum slots (groups_x · rows)
+    uint pad;
+};
+
 #endif

@@ -5,6 +5,7 @@ pub mod adam;
 pub mod deform;
 pub mod densify;
 pub mod loss;
+pub mod metrics;
 pub mod mlp;
 pub mod mlp_fused;
 pub mod motion;
@@ -209,6 +210,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             q50_frac,
             q75_frac
         ),
+        layout!(metrics::MetricsParams, n, groups_x, groups, pad),
     ]
 }
 

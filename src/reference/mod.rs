@@ -5,6 +5,7 @@ pub mod adam;
 pub mod deform;
 pub mod densify;
 pub mod loss;
+pub mod metrics;
 pub mod mlp;
 pub mod motion;
 pub mod radix_sort;
