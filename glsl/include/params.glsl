@@ -249,4 +249,29 @@ struct FlowParams {
     float pad0;
 };
 
+// src/kernels/motion.rs — magnitude of a per-pixel vector field and its normalisation over the
+// image (forward and backward). Quantile positions come from the host (they depend only on n).
+struct MotionNormParams {
+    uint n;           // pixels (H·W)
+    uint channels;    // 2 or 3 floats per pixel, interleaved [H·W, C]
+    uint mode;        // 0 min-max, 1 max-abs, 2 z-score, 3 IQR
+    uint groups;      // partial-result slots of the per-pixel passes (groups_x · rows)
+    uint groups_x;    // workgroups along x of the per-pixel grid (2D beyond 65535)
+    float eps;        // flat map: denominator below eps (absolute, magnitude units)
+    uint q25_lo;      // sorted position floor(q·(n − 1)) of q25, q50, q75
+    uint q50_lo;
+    uint q75_lo;
+    float q25_frac;   // q·(n − 1) − floor(q·(n − 1))
+    float q50_frac;
+    float q75_frac;
+};
+
+// src/kernels/metrics.rs — per-pixel passes of MMAP (keys, AP terms) and DRC.
+struct MetricsParams {
+    uint n;           // pixels (H·W)
+    uint groups_x;    // workgroups along x of the per-pixel grid
+    uint groups;      // partial-sum slots (groups_x · rows)
+    uint pad;
+};
+
 #endif

@@ -7,8 +7,10 @@ pub mod densify;
 pub mod dispflow;
 pub mod flow;
 pub mod loss;
+pub mod metrics;
 pub mod mlp;
 pub mod mlp_fused;
+pub mod motion;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;
@@ -211,6 +213,22 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             pad0,
             pad1
         ),
+        layout!(
+            motion::MotionNormParams,
+            n,
+            channels,
+            mode,
+            groups,
+            groups_x,
+            eps,
+            q25_lo,
+            q50_lo,
+            q75_lo,
+            q25_frac,
+            q50_frac,
+            q75_frac
+        ),
+        layout!(metrics::MetricsParams, n, groups_x, groups, pad),
     ]
 }
 
