@@ -55,6 +55,22 @@ pub struct TrainArgs {
     /// Seed of everything random (initial points, frame order, MLP init) [default: 0].
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Weight α of the displacement-flow motion loss; 0 = the Deformable-3DGS baseline
+    /// [default: 0 while the motion step is being validated].
+    #[arg(long)]
+    pub motion_weight: Option<f32>,
+    /// Iteration t0 from which the motion loss is on [preset: paper 10000, fast 10000].
+    #[arg(long)]
+    pub motion_start: Option<u32>,
+    /// Normalisation of the motion magnitudes: min-max, max-abs, z-score or iqr [default: min-max].
+    #[arg(long)]
+    pub motion_normalize: Option<crate::kernels::motion::NormMode>,
+    /// Temporal gap, in training frames sorted by time, between a frame and its pair [default: 1].
+    #[arg(long)]
+    pub pair_gap: Option<u32>,
+    /// Optical-flow preset: fast, default or accurate (pyramid levels, warps, iterations).
+    #[arg(long)]
+    pub flow_preset: Option<String>,
     /// Print a per-kernel GPU time breakdown at every log line.
     #[arg(short, long)]
     pub verbose: bool,
@@ -137,6 +153,11 @@ pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
     c.densify.budget = a.budget.unwrap_or(c.densify.budget);
     c.background = a.background.unwrap_or(c.background);
     c.seed = a.seed.unwrap_or(c.seed);
+    c.motion_weight = a.motion_weight.unwrap_or(c.motion_weight);
+    c.motion_start = a.motion_start.unwrap_or(c.motion_start);
+    c.motion_normalize = a.motion_normalize.unwrap_or(c.motion_normalize);
+    c.pair_gap = a.pair_gap.unwrap_or(c.pair_gap);
+    c.flow_preset = a.flow_preset.clone().unwrap_or(c.flow_preset);
     c.validate()?;
     Ok(c)
 }

@@ -112,6 +112,14 @@ pub struct TrainConfig {
     pub checkpoint_interval: u32,
     /// Motion (displacement-flow) loss weight α; 0 = the Deformable-3DGS baseline.
     pub motion_weight: f32,
+    /// Iteration t0 from which the motion term is on (α_t ramps from 0.1·α to α after it).
+    pub motion_start: u32,
+    /// Normalisation of both magnitude maps.
+    pub motion_normalize: crate::kernels::motion::NormMode,
+    /// Temporal gap (in training frames sorted by time) between the frame and its pair.
+    pub pair_gap: u32,
+    /// Optical-flow preset: "fast", "default" or "accurate".
+    pub flow_preset: String,
 }
 
 impl Default for TrainConfig {
@@ -158,6 +166,10 @@ impl TrainConfig {
             log_interval: 100,
             checkpoint_interval: 2000,
             motion_weight: 0.0,
+            motion_start: 10_000,
+            motion_normalize: crate::kernels::motion::NormMode::MinMax,
+            pair_gap: 1,
+            flow_preset: "default".into(),
         }
     }
 

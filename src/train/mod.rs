@@ -12,8 +12,11 @@ use crate::error::{Error, Result};
 use crate::kernels::adam::{Adam, AdamBuffers, AdamGroup};
 use crate::kernels::deform::{Canonical, DeformApply, Drawn};
 use crate::kernels::densify::{Densifier, DensifyBuffers, DensifySettings, GaussianBuffers};
+use crate::kernels::dispflow::DispFlow;
+use crate::kernels::flow::{FlowConfig, FlowEstimator, FlowScratch, TvL1Flow};
 use crate::kernels::loss::{LossBuffers, LossValues, PhotometricLoss};
 use crate::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
+use crate::kernels::motion::{MotionNorm, NormBuffers, NormConfig};
 use crate::kernels::raster::{
     Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
 };
@@ -159,6 +162,31 @@ impl Default for LossValues {
     }
 }
 
+/// Buffers of the DispFlow-GS motion term, allocated only when the motion weight is > 0.
+struct MotionState {
+    dispflow: DispFlow,
+    mlp_bufs2: MlpBuffers,
+    deform_out2: Buffer,
+    d_deform2: Buffer,
+    delta: Buffer,
+    drawn2: [Buffer; 3],
+    inter: RasterBuffers,
+    flow: TvL1Flow,
+    flow_scratch: FlowScratch,
+    scene_flow: Buffer,
+    norm: MotionNorm,
+    norm_disp: NormBuffers,
+    norm_scene: NormBuffers,
+    flags: Buffer,
+    d_mhat: Buffer,
+    d_feat: Buffer,
+    sums: Buffer,
+    norm_cfg: NormConfig,
+    /// Training frames sorted by time (indices into `frames`) and each frame's rank in it.
+    by_time: Vec<usize>,
+    rank: Vec<usize>,
+}
+
 /// Everything the training step reads and writes, allocated once for the Gaussian budget.
 pub struct Trainer<'g> {
     pub gpu: &'g Gpu,
@@ -200,6 +228,7 @@ pub struct Trainer<'g> {
     pub extent: f32,
     time_interval: f32,
     time_noise: bool,
+    motion: Option<MotionState>,
     /// Iterations completed.
     pub iteration: u32,
 }
@@ -309,12 +338,66 @@ impl<'g> Trainer<'g> {
             feature_dims: 0,
             isect_capacity: (4 * host.len() as u32).max(1 << 16),
         };
+        let motion_on = cfg.motion_weight > 0.0;
+        // The displacement flow needs 3 feature channels; without the motion term none.
+        let size = RasterSize {
+            feature_dims: if motion_on { 3 } else { 0 },
+            ..size
+        };
         let raster_bufs = raster.buffers(gpu, &size)?;
         let loss = PhotometricLoss::new(gpu)?;
         let loss_bufs = loss.buffers(gpu, w, h)?;
         let densifier = Densifier::new(gpu)?;
         let densify_bufs = densifier.buffers(gpu, budget)?;
         let n = host.len() as u32;
+        let motion = if motion_on {
+            let px = (w * h) as u64;
+            let mut by_time: Vec<usize> = (0..frames.len()).collect();
+            by_time.sort_by(|&a, &b| frames[a].time.total_cmp(&frames[b].time).then(a.cmp(&b)));
+            let mut rank = vec![0; frames.len()];
+            for (r, &i) in by_time.iter().enumerate() {
+                rank[i] = r;
+            }
+            let flow = TvL1Flow::new(gpu, FlowConfig::preset(&cfg.flow_preset)?)?;
+            let norm = MotionNorm::new(gpu)?;
+            let ncfg = NormConfig::new(cfg.motion_normalize, 1e-6)?;
+            let norm_disp = norm.buffers(gpu, w, h, 3)?;
+            let norm_scene = norm.buffers(gpu, w, h, 2)?;
+            Some(MotionState {
+                dispflow: DispFlow::new(gpu)?,
+                mlp_bufs2: mlp.buffers(gpu, budget)?,
+                deform_out2: gpu.buffer("deformation t2", cap * 40)?,
+                d_deform2: gpu.buffer("deformation grads t2", cap * 40)?,
+                delta: gpu.buffer("displacement", cap * 12)?,
+                drawn2: [
+                    gpu.buffer("drawn means t2", cap * 12)?,
+                    gpu.buffer("drawn scales t2", cap * 12)?,
+                    gpu.buffer("drawn quats t2", cap * 16)?,
+                ],
+                inter: raster.buffers(
+                    gpu,
+                    &RasterSize {
+                        feature_dims: 0,
+                        ..size
+                    },
+                )?,
+                flow_scratch: flow.scratch(gpu, w, h)?,
+                flow,
+                scene_flow: gpu.buffer("scene flow", px * 8)?,
+                norm,
+                norm_disp,
+                norm_scene,
+                flags: gpu.buffer("motion degenerate flags", 16)?,
+                d_mhat: gpu.buffer("d normalised displacement magnitude", px * 4)?,
+                d_feat: gpu.buffer("d displacement flow", px * 12)?,
+                sums: gpu.buffer("motion partial sums", px.div_ceil(256) * 4)?,
+                norm_cfg: ncfg,
+                by_time,
+                rank,
+            })
+        } else {
+            None
+        };
         let time_noise = match cfg.time_noise {
             config::TimeNoise::Auto => !blender,
             config::TimeNoise::On => true,
@@ -371,6 +454,7 @@ impl<'g> Trainer<'g> {
             extent: camera_extent(&data.train),
             time_interval: 1.0 / distinct_times as f32,
             time_noise,
+            motion,
             iteration: 0,
         })
     }
@@ -464,6 +548,7 @@ impl<'g> Trainer<'g> {
             alpha_max: 0.99,
         };
         let sh_degree = self.sh_degree_at(it);
+        let motion_w = self.motion_weight_at(it);
         loop {
             let frame = &self.frames[fi];
             let mut rec = if timed {
@@ -471,31 +556,36 @@ impl<'g> Trainer<'g> {
             } else {
                 Recorder::new(self.gpu)?
             };
-            rec.set_zone("deform");
-            self.record_deform(&mut rec, t, active);
-            rec.set_zone("raster");
-            let g = splat_inputs(&self.layout, &self.params, &self.drawn, self.n, sh_degree);
-            self.raster
-                .forward(&mut rec, &self.raster_bufs, &frame.camera, &g, &opts);
-            rec.set_zone("loss");
-            self.loss.record(
-                &mut rec,
-                &mut self.loss_bufs,
-                self.raster_bufs.out_rgba.all(),
-                frame.target.all(),
-                self.d_render.all(),
-                self.cfg.lambda_ssim,
-            );
-            rec.set_zone("raster bwd");
-            let d = OutputGrads {
-                rgba: self.d_render.all(),
-                depth: self.zero_depth.all(),
-                features: None,
-            };
-            self.raster
-                .backward(&mut rec, &self.raster_bufs, &frame.camera, &g, &opts, &d);
-            rec.set_zone("deform bwd");
-            self.record_backward_to_params(&mut rec, active);
+            if motion_w > 0.0 {
+                self.record_dispflow_step(&mut rec, fi, t, &opts, sh_degree, motion_w);
+            } else {
+                rec.set_zone("deform");
+                self.record_deform(&mut rec, t, active);
+                rec.set_zone("raster");
+                let g = splat_inputs(&self.layout, &self.params, &self.drawn, self.n, sh_degree);
+                self.raster
+                    .forward(&mut rec, &self.raster_bufs, &frame.camera, &g, &opts);
+                rec.set_zone("loss");
+                let (out, tgt) = (self.raster_bufs.out_rgba.all(), frame.target.all());
+                self.loss.record(
+                    &mut rec,
+                    &mut self.loss_bufs,
+                    out,
+                    tgt,
+                    self.d_render.all(),
+                    self.cfg.lambda_ssim,
+                );
+                rec.set_zone("raster bwd");
+                let d = OutputGrads {
+                    rgba: self.d_render.all(),
+                    depth: self.zero_depth.all(),
+                    features: None,
+                };
+                self.raster
+                    .backward(&mut rec, &self.raster_bufs, &frame.camera, &g, &opts, &d);
+                rec.set_zone("deform bwd");
+                self.record_backward_to_params(&mut rec, active);
+            }
             rec.set_zone("densify stats");
             if it <= self.cfg.densify.until {
                 // (An overflowed, discarded step still adds its statistics once more; densification
@@ -541,6 +631,239 @@ impl<'g> Trainer<'g> {
         }
     }
 
+    /// α_t of the motion term at 1-based `iteration`: 0 before `motion_start` (or without the
+    /// deformation), then linear from 0.1·α to α over the remaining iterations.
+    pub fn motion_weight_at(&self, iteration: u32) -> f32 {
+        let (a, t0, end) = (
+            self.cfg.motion_weight,
+            self.cfg.motion_start,
+            self.cfg.iterations,
+        );
+        if self.motion.is_none() || a <= 0.0 || iteration < t0 || !self.deform_active(iteration) {
+            return 0.0;
+        }
+        let f = if end > t0 {
+            (iteration - t0) as f32 / (end - t0) as f32
+        } else {
+            1.0
+        };
+        a * (0.1 + 0.9 * f.clamp(0.0, 1.0))
+    }
+
+    /// The temporal neighbour of training frame `fi`: `pair_gap` frames later in time (earlier
+    /// at the end of the sequence).
+    fn pair_frame(&self, fi: usize) -> usize {
+        let m = self.motion.as_ref().expect("motion state");
+        let (r, n, gap) = (
+            m.rank[fi],
+            m.by_time.len(),
+            self.cfg.pair_gap.max(1) as usize,
+        );
+        let j = if r + gap < n {
+            r + gap
+        } else {
+            r.saturating_sub(gap)
+        };
+        m.by_time[j]
+    }
+
+    /// The DispFlow-GS step (DESIGN §2): D at t1 and t2, δ = dx(t2) − dx(t1) splatted with the
+    /// render of (v1, t1); intermediate render (v1, t2) without gradient; scene motion = flow
+    /// from the frame's image to it; normalised magnitudes; α_t·L1 between them added to the
+    /// photometric loss; gradients reach the MLP at both times and the Gaussians through the
+    /// blend weights. A degenerate (flat) map skips the motion term for the step.
+    fn record_dispflow_step(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        fi: usize,
+        t1: f32,
+        opts: &RenderOpts,
+        sh_degree: u32,
+        weight: f32,
+    ) {
+        let fj = self.pair_frame(fi);
+        let t2 = self.frames[fj].time;
+        let cam = self.frames[fi].camera;
+        let m = self.motion.as_mut().expect("motion state");
+        let means = self.layout.slice(&self.params, Section::Means, self.n);
+        rec.set_zone("deform");
+        self.mlp.forward(
+            rec,
+            &self.mlp_bufs,
+            self.n,
+            means,
+            MlpTime::Batch(t1),
+            self.mlp_params.all(),
+            self.deform_out.all(),
+        );
+        self.mlp.forward(
+            rec,
+            &m.mlp_bufs2,
+            self.n,
+            means,
+            MlpTime::Batch(t2),
+            self.mlp_params.all(),
+            m.deform_out2.all(),
+        );
+        m.dispflow.displacement(
+            rec,
+            self.n,
+            self.deform_out.all(),
+            m.deform_out2.all(),
+            m.delta.all(),
+        );
+        let canon = Canonical {
+            means,
+            log_scales: self.layout.slice(&self.params, Section::LogScales, self.n),
+            quats: self.layout.slice(&self.params, Section::Quats, self.n),
+        };
+        let drawn = Drawn {
+            means: self.drawn[0].all(),
+            scales: self.drawn[1].all(),
+            quats: self.drawn[2].all(),
+        };
+        self.deform.forward(
+            rec,
+            self.n,
+            &canon,
+            Some(self.deform_out.all()),
+            self.d_drawn_dummy.all(),
+            &drawn,
+        );
+        let drawn2 = Drawn {
+            means: m.drawn2[0].all(),
+            scales: m.drawn2[1].all(),
+            quats: m.drawn2[2].all(),
+        };
+        self.deform.forward(
+            rec,
+            self.n,
+            &canon,
+            Some(m.deform_out2.all()),
+            self.d_drawn_dummy.all(),
+            &drawn2,
+        );
+        rec.set_zone("raster");
+        let mut g = splat_inputs(&self.layout, &self.params, &self.drawn, self.n, sh_degree);
+        g.features = Some((m.delta.all(), 3));
+        self.raster.forward(rec, &self.raster_bufs, &cam, &g, opts);
+        rec.set_zone("loss");
+        let target = self.frames[fi].target.all();
+        self.loss.record(
+            rec,
+            &mut self.loss_bufs,
+            self.raster_bufs.out_rgba.all(),
+            target,
+            self.d_render.all(),
+            self.cfg.lambda_ssim,
+        );
+        rec.set_zone("intermediate");
+        let g2 = splat_inputs(&self.layout, &self.params, &m.drawn2, self.n, sh_degree);
+        self.raster.forward(rec, &m.inter, &cam, &g2, opts);
+        rec.set_zone("flow");
+        m.flow.record(
+            rec,
+            &m.flow_scratch,
+            target,
+            m.inter.out_rgba.all(),
+            m.scene_flow.all(),
+        );
+        rec.set_zone("motion");
+        m.norm.record(
+            rec,
+            &mut m.norm_disp,
+            self.raster_bufs.out_features.all(),
+            m.norm_cfg,
+        );
+        m.norm
+            .record(rec, &mut m.norm_scene, m.scene_flow.all(), m.norm_cfg);
+        rec.copy(
+            m.norm_disp.stats().buf.slice(m.norm_disp.stats().offset, 4),
+            m.flags.slice(0, 4),
+        );
+        rec.copy(
+            m.norm_scene
+                .stats()
+                .buf
+                .slice(m.norm_scene.stats().offset, 4),
+            m.flags.slice(4, 4),
+        );
+        let px = cam.width * cam.height;
+        m.dispflow.motion_l1(
+            rec,
+            px,
+            weight,
+            m.norm_disp.m_hat(),
+            m.norm_scene.m_hat(),
+            m.flags.all(),
+            m.d_mhat.all(),
+            m.sums.all(),
+        );
+        m.norm.record_backward(
+            rec,
+            &m.norm_disp,
+            self.raster_bufs.out_features.all(),
+            m.d_mhat.all(),
+            m.d_feat.all(),
+        );
+        rec.set_zone("raster bwd");
+        let d = OutputGrads {
+            rgba: self.d_render.all(),
+            depth: self.zero_depth.all(),
+            features: Some(m.d_feat.all()),
+        };
+        self.raster
+            .backward(rec, &self.raster_bufs, &cam, &g, opts, &d);
+        rec.set_zone("deform bwd");
+        let rb = &self.raster_bufs;
+        let d_drawn = Drawn {
+            means: rb.d_means.all(),
+            scales: rb.d_scales.all(),
+            quats: rb.d_quats.all(),
+        };
+        let grads = Canonical {
+            means: self.layout.slice(&self.grads, Section::Means, self.n),
+            log_scales: self.layout.slice(&self.grads, Section::LogScales, self.n),
+            quats: self.layout.slice(&self.grads, Section::Quats, self.n),
+        };
+        self.deform.backward(
+            rec,
+            self.n,
+            &canon,
+            &d_drawn,
+            &grads,
+            Some(self.d_deform.all()),
+            self.d_drawn_dummy.all(),
+        );
+        copy_raster_grads(rec, &self.layout, rb, &self.grads, self.n);
+        m.dispflow.displacement_bwd(
+            rec,
+            self.n,
+            rb.d_features.all(),
+            self.d_deform.all(),
+            m.d_deform2.all(),
+        );
+        rec.set_zone("mlp bwd");
+        self.mlp.backward(
+            rec,
+            &self.mlp_bufs,
+            self.n,
+            self.mlp_params.all(),
+            self.d_deform.all(),
+            self.mlp_grads.all(),
+            false,
+        );
+        self.mlp.backward(
+            rec,
+            &m.mlp_bufs2,
+            self.n,
+            self.mlp_params.all(),
+            m.d_deform2.all(),
+            self.mlp_grads.all(),
+            true,
+        );
+    }
+
     /// Rasteriser gradients → canonical parameter gradients (and MLP output gradients, then
     /// the MLP's weight gradients when the deformation is active).
     fn record_backward_to_params(&self, rec: &mut Recorder<'_>, active: bool) {
@@ -566,24 +889,7 @@ impl<'g> Trainer<'g> {
             dd,
             self.d_drawn_dummy.all(),
         );
-        if self.n > 0 {
-            let n = self.n as u64;
-            rec.copy(
-                rb.d_opacity_logits.slice(0, n * 4),
-                l.slice(&self.grads, Section::Opacity, self.n),
-            );
-            rec.copy(
-                rb.d_sh_dc.slice(0, n * 12),
-                l.slice(&self.grads, Section::ShDc, self.n),
-            );
-            if l.sh_coeffs > 1 {
-                let bytes = n * 4 * l.row_len(Section::ShRest) as u64;
-                rec.copy(
-                    rb.d_sh_rest.slice(0, bytes),
-                    l.slice(&self.grads, Section::ShRest, self.n),
-                );
-            }
-        }
+        copy_raster_grads(rec, l, rb, &self.grads, self.n);
         if active {
             rec.set_zone("mlp bwd");
             self.mlp.backward(
@@ -825,6 +1131,35 @@ impl Trainer<'_> {
         self.n = c.gaussians.len() as u32;
         self.iteration = c.iteration;
         Ok(())
+    }
+}
+
+/// Opacity and SH gradients go from the rasteriser's buffers into their Adam sections.
+fn copy_raster_grads(
+    rec: &mut Recorder<'_>,
+    l: &GaussianLayout,
+    rb: &RasterBuffers,
+    grads: &Buffer,
+    n: u32,
+) {
+    if n == 0 {
+        return;
+    }
+    let n64 = n as u64;
+    rec.copy(
+        rb.d_opacity_logits.slice(0, n64 * 4),
+        l.slice(grads, Section::Opacity, n),
+    );
+    rec.copy(
+        rb.d_sh_dc.slice(0, n64 * 12),
+        l.slice(grads, Section::ShDc, n),
+    );
+    if l.sh_coeffs > 1 {
+        let bytes = n64 * 4 * l.row_len(Section::ShRest) as u64;
+        rec.copy(
+            rb.d_sh_rest.slice(0, bytes),
+            l.slice(grads, Section::ShRest, n),
+        );
     }
 }
 
