@@ -28,7 +28,7 @@ pub struct TrainArgs {
     /// TOML file overriding fields of the preset (same names as the run's config.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Training iterations [preset: paper 20000, fast 1000].
+    /// Training iterations [preset: paper 20000, fast 600].
     #[arg(long)]
     pub iterations: Option<u32>,
     /// Continue from OUT/checkpoints/last.ckpt when it exists (same configuration).

@@ -142,7 +142,8 @@ pub enum TimeNoise {
 pub enum Preset {
     /// The paper's setting: 20 000 iterations, 8×256 MLP, warm-up 3000, densify 500–15 000.
     Paper,
-    /// Minutes on a CPU: 1000 iterations, 4×64 MLP, warm-up 300, densify 100–700, SH degree 1.
+    /// Minutes on a CPU: 600 iterations, 4×64 MLP, warm-up 200, densify 100–450 (no opacity
+    /// reset), SH degree 1.
     Fast,
 }
 
@@ -175,23 +176,23 @@ impl TrainConfig {
 
     pub fn fast() -> Self {
         TrainConfig {
-            iterations: 1000,
+            iterations: 600,
             sh_degree: 1,
             sh_interval: 500,
             max_resolution: 160,
             mlp_width: 64,
             mlp_depth: 4,
-            warm_up: 300,
+            warm_up: 200,
             densify: DensifyConfig {
                 from: 100,
-                until: 700,
+                until: 450,
                 interval: 100,
-                opacity_reset_interval: 500,
+                opacity_reset_interval: 1000,
                 budget: 20_000,
                 ..DensifyConfig::default()
             },
             log_interval: 50,
-            checkpoint_interval: 500,
+            checkpoint_interval: 200,
             ..TrainConfig::paper()
         }
     }
