@@ -459,23 +459,6 @@ impl<'g> Trainer<'g> {
         })
     }
 
-    fn canonical(&self) -> Canonical<'_> {
-        let l = &self.layout;
-        Canonical {
-            means: l.slice(&self.params, Section::Means, self.n),
-            log_scales: l.slice(&self.params, Section::LogScales, self.n),
-            quats: l.slice(&self.params, Section::Quats, self.n),
-        }
-    }
-
-    fn drawn(&self) -> Drawn<'_> {
-        Drawn {
-            means: self.drawn[0].all(),
-            scales: self.drawn[1].all(),
-            quats: self.drawn[2].all(),
-        }
-    }
-
     /// Whether the deformation network is active at 1-based `iteration`.
     pub fn deform_active(&self, iteration: u32) -> bool {
         iteration > self.cfg.warm_up
@@ -505,10 +488,10 @@ impl<'g> Trainer<'g> {
         self.deform.forward(
             rec,
             self.n,
-            &self.canonical(),
+            &canonical(&self.layout, &self.params, self.n),
             d,
             self.d_drawn_dummy.all(),
-            &self.drawn(),
+            &drawn_of(&self.drawn),
         );
     }
 
@@ -712,16 +695,8 @@ impl<'g> Trainer<'g> {
             m.deform_out2.all(),
             m.delta.all(),
         );
-        let canon = Canonical {
-            means,
-            log_scales: self.layout.slice(&self.params, Section::LogScales, self.n),
-            quats: self.layout.slice(&self.params, Section::Quats, self.n),
-        };
-        let drawn = Drawn {
-            means: self.drawn[0].all(),
-            scales: self.drawn[1].all(),
-            quats: self.drawn[2].all(),
-        };
+        let canon = canonical(&self.layout, &self.params, self.n);
+        let drawn = drawn_of(&self.drawn);
         self.deform.forward(
             rec,
             self.n,
@@ -730,11 +705,7 @@ impl<'g> Trainer<'g> {
             self.d_drawn_dummy.all(),
             &drawn,
         );
-        let drawn2 = Drawn {
-            means: m.drawn2[0].all(),
-            scales: m.drawn2[1].all(),
-            quats: m.drawn2[2].all(),
-        };
+        let drawn2 = drawn_of(&m.drawn2);
         self.deform.forward(
             rec,
             self.n,
@@ -815,27 +786,9 @@ impl<'g> Trainer<'g> {
         self.raster
             .backward(rec, &self.raster_bufs, &cam, &g, opts, &d);
         rec.set_zone("deform bwd");
+        self.record_grads_to_params(rec, true);
+        let m = self.motion.as_ref().expect("motion state");
         let rb = &self.raster_bufs;
-        let d_drawn = Drawn {
-            means: rb.d_means.all(),
-            scales: rb.d_scales.all(),
-            quats: rb.d_quats.all(),
-        };
-        let grads = Canonical {
-            means: self.layout.slice(&self.grads, Section::Means, self.n),
-            log_scales: self.layout.slice(&self.grads, Section::LogScales, self.n),
-            quats: self.layout.slice(&self.grads, Section::Quats, self.n),
-        };
-        self.deform.backward(
-            rec,
-            self.n,
-            &canon,
-            &d_drawn,
-            &grads,
-            Some(self.d_deform.all()),
-            self.d_drawn_dummy.all(),
-        );
-        copy_raster_grads(rec, &self.layout, rb, &self.grads, self.n);
         m.dispflow.displacement_bwd(
             rec,
             self.n,
@@ -867,41 +820,41 @@ impl<'g> Trainer<'g> {
     /// Rasteriser gradients → canonical parameter gradients (and MLP output gradients, then
     /// the MLP's weight gradients when the deformation is active).
     fn record_backward_to_params(&self, rec: &mut Recorder<'_>, active: bool) {
-        let l = &self.layout;
+        self.record_grads_to_params(rec, active);
+        if active {
+            rec.set_zone("mlp bwd");
+            let (p, d, g) = (
+                self.mlp_params.all(),
+                self.d_deform.all(),
+                self.mlp_grads.all(),
+            );
+            self.mlp
+                .backward(rec, &self.mlp_bufs, self.n, p, d, g, false);
+        }
+    }
+
+    /// Deform backward into the canonical gradient sections (and ∂L/∂(dx, dr, ds) into
+    /// `d_deform` when the deformation is active) plus the opacity/SH gradient copies.
+    fn record_grads_to_params(&self, rec: &mut Recorder<'_>, active: bool) {
         let rb = &self.raster_bufs;
         let d_drawn = Drawn {
             means: rb.d_means.all(),
             scales: rb.d_scales.all(),
             quats: rb.d_quats.all(),
         };
-        let grads = Canonical {
-            means: l.slice(&self.grads, Section::Means, self.n),
-            log_scales: l.slice(&self.grads, Section::LogScales, self.n),
-            quats: l.slice(&self.grads, Section::Quats, self.n),
-        };
+        let grads = canonical(&self.layout, &self.grads, self.n);
+        let params = canonical(&self.layout, &self.params, self.n);
         let dd = active.then(|| self.d_deform.all());
         self.deform.backward(
             rec,
             self.n,
-            &self.canonical(),
+            &params,
             &d_drawn,
             &grads,
             dd,
             self.d_drawn_dummy.all(),
         );
-        copy_raster_grads(rec, l, rb, &self.grads, self.n);
-        if active {
-            rec.set_zone("mlp bwd");
-            self.mlp.backward(
-                rec,
-                &self.mlp_bufs,
-                self.n,
-                self.mlp_params.all(),
-                self.d_deform.all(),
-                self.mlp_grads.all(),
-                false,
-            );
-        }
+        copy_raster_grads(rec, &self.layout, rb, &self.grads, self.n);
     }
 
     fn record_adam(&self, rec: &mut Recorder<'_>, it: u32, active: bool) {
@@ -1131,6 +1084,24 @@ impl Trainer<'_> {
         self.n = c.gaussians.len() as u32;
         self.iteration = c.iteration;
         Ok(())
+    }
+}
+
+/// Means, log-scales and quaternions of rows 0..n of a Gaussian buffer (parameters or grads).
+fn canonical<'a>(l: &GaussianLayout, buf: &'a Buffer, n: u32) -> Canonical<'a> {
+    Canonical {
+        means: l.slice(buf, Section::Means, n),
+        log_scales: l.slice(buf, Section::LogScales, n),
+        quats: l.slice(buf, Section::Quats, n),
+    }
+}
+
+/// Drawn means, scales and rotations held in three buffers.
+fn drawn_of(b: &[Buffer; 3]) -> Drawn<'_> {
+    Drawn {
+        means: b[0].all(),
+        scales: b[1].all(),
+        quats: b[2].all(),
     }
 }
 
