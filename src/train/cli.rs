@@ -59,7 +59,7 @@ pub struct TrainArgs {
     /// [default: 0 while the motion step is being validated].
     #[arg(long)]
     pub motion_weight: Option<f32>,
-    /// Iteration t0 from which the motion loss is on [preset: paper 10000, fast 10000].
+    /// Iteration t0 from which the motion loss is on [preset: paper 10000, fast 400].
     #[arg(long)]
     pub motion_start: Option<u32>,
     /// Normalisation of the motion magnitudes: min-max, max-abs, z-score or iqr [default: min-max].

@@ -193,6 +193,7 @@ impl TrainConfig {
             },
             log_interval: 50,
             checkpoint_interval: 200,
+            motion_start: 400,
             ..TrainConfig::paper()
         }
     }
