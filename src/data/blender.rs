@@ -342,23 +342,9 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> DataResult<Dataset> {
         ));
     }
     if chosen.is_none() && matches!(pref, PointsPreference::Auto | PointsPreference::Ply) {
-        match &ply {
-            Some(p) => {
-                let (pts, cols) = points::read_ply(p)?;
-                chosen = Some(InitPoints {
-                    positions: pts.iter().map(|p| p.as_vec3()).collect(),
-                    colors: cols,
-                    source: PointSource::Ply(p.clone()),
-                });
-            }
-            None if pref == PointsPreference::Ply => {
-                return Err(DataError::file(
-                    &dir.join("points3d.ply"),
-                    "missing; expected points3d.ply or fused.ply",
-                ))
-            }
-            None => {}
-        }
+        chosen = points::ply_points(dir, ply.as_deref(), pref, |pts| {
+            pts.iter().map(|p| p.as_vec3()).collect()
+        })?;
     }
     let bounds = chosen
         .as_ref()

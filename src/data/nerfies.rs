@@ -735,23 +735,7 @@ fn initial_points(
         }
     }
     if chosen.is_none() && matches!(pref, PointsPreference::Auto | PointsPreference::Ply) {
-        match &ply {
-            Some(p) => {
-                let (pts, cols) = points::read_ply(p)?;
-                chosen = Some(InitPoints {
-                    positions: normalise_all(scene, &pts),
-                    colors: cols,
-                    source: PointSource::Ply(p.clone()),
-                });
-            }
-            None if pref == PointsPreference::Ply => {
-                return Err(DataError::file(
-                    &dir.join("points3d.ply"),
-                    "missing; expected points3d.ply or fused.ply",
-                ))
-            }
-            None => {}
-        }
+        chosen = points::ply_points(dir, ply.as_deref(), pref, |pts| normalise_all(scene, pts))?;
     }
     let bounds = scene_bounds
         .or_else(|| chosen.as_ref().and_then(|c| Bounds::of(&c.positions)))

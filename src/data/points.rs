@@ -454,6 +454,32 @@ fn jacobi4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
 /// Positions and optional colours read from a point file.
 pub type PointsAndColors = (Vec<DVec3>, Option<Vec<[f32; 3]>>);
 
+/// Initial points from a PLY file (positions mapped by `place`), shared by both loaders:
+/// `None` when there is no file and the preference allows falling through, an error naming the
+/// expected files when PLY was asked for explicitly.
+pub fn ply_points(
+    dir: &Path,
+    ply: Option<&Path>,
+    pref: PointsPreference,
+    place: impl Fn(&[DVec3]) -> Vec<Vec3>,
+) -> DataResult<Option<InitPoints>> {
+    match ply {
+        Some(p) => {
+            let (pts, cols) = read_ply(p)?;
+            Ok(Some(InitPoints {
+                positions: place(&pts),
+                colors: cols,
+                source: PointSource::Ply(p.to_path_buf()),
+            }))
+        }
+        None if pref == PointsPreference::Ply => Err(DataError::file(
+            &dir.join("points3d.ply"),
+            "missing; expected points3d.ply or fused.ply",
+        )),
+        None => Ok(None),
+    }
+}
+
 /// Reads the `vertex` element of a PLY file (ascii or binary): positions and colours when the
 /// file has `red green blue` properties.
 pub fn read_ply(path: &Path) -> DataResult<PointsAndColors> {
