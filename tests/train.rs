@@ -52,10 +52,10 @@ fn short_run_raises_test_psnr() {
     let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
     let n0 = tr.n;
     let before: f64 = tr
-        .evaluate(None)
+        .evaluate(false)
         .unwrap()
         .iter()
-        .map(|v| v.1.psnr)
+        .map(|v| v.values.psnr)
         .sum::<f64>()
         / ds.val.len() as f64;
     let mut last = None;
@@ -65,10 +65,10 @@ fn short_run_raises_test_psnr() {
         }
     }
     let after: f64 = tr
-        .evaluate(None)
+        .evaluate(false)
         .unwrap()
         .iter()
-        .map(|v| v.1.psnr)
+        .map(|v| v.values.psnr)
         .sum::<f64>()
         / ds.val.len() as f64;
     let l = last.unwrap();

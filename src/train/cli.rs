@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use super::checkpoint::{last_checkpoint, write_atomic, write_ply, Checkpoint};
 use super::config::{Background, Preset, TrainConfig};
-use super::Trainer;
+use super::{FrameEval, Trainer};
 use crate::data::synthetic::{self, Preset as ScenePreset};
 use crate::data::{self, LoadOptions};
 use crate::error::{Error, Result};
@@ -55,8 +55,8 @@ pub struct TrainArgs {
     /// Seed of everything random (initial points, frame order, MLP init) [default: 0].
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Weight α of the displacement-flow motion loss; 0 = the Deformable-3DGS baseline
-    /// [default: 0 while the motion step is being validated].
+    /// Weight α of the displacement-flow motion loss (DispFlow-GS); 0 = the Deformable-3DGS
+    /// baseline [default: 0.1].
     #[arg(long)]
     pub motion_weight: Option<f32>,
     /// Iteration t0 from which the motion loss is on [preset: paper 10000, fast 400].
@@ -68,9 +68,14 @@ pub struct TrainArgs {
     /// Temporal gap, in training frames sorted by time, between a frame and its pair [default: 1].
     #[arg(long)]
     pub pair_gap: Option<u32>,
-    /// Optical-flow preset: fast, default or accurate (pyramid levels, warps, iterations).
+    /// Optical-flow preset: fast, default or accurate (pyramid levels, warps, iterations)
+    /// [default: default].
     #[arg(long)]
     pub flow_preset: Option<String>,
+    /// Motion decomposition: direct = intermediate render (v1, t2), the paper's; reverse =
+    /// intermediate (v2, t1), the ablation [default: direct].
+    #[arg(long, value_enum)]
+    pub motion_order: Option<super::config::MotionOrder>,
     /// Print a per-kernel GPU time breakdown at every log line.
     #[arg(short, long)]
     pub verbose: bool,
@@ -88,6 +93,12 @@ pub struct Metrics {
     pub num_gaussians: u32,
     /// Median wall-clock milliseconds per training step (submit + wait).
     pub ms_per_step: f64,
+    /// Mean over test frames with a non-empty motion mask of the displacement flow's AP
+    /// (present when the dataset has motion masks).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mmap: Option<f64>,
+    /// Mean DRC over test frames that have an earlier time in the dataset.
+    pub drc: Option<f64>,
     pub device: String,
     pub dataset: String,
     pub per_frame: Vec<FrameMetrics>,
@@ -96,8 +107,38 @@ pub struct Metrics {
 #[derive(Debug, Serialize)]
 pub struct FrameMetrics {
     pub id: String,
+    pub time: f32,
     pub psnr: f64,
     pub ssim: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ap: Option<f64>,
+    pub drc: Option<f64>,
+}
+
+impl FrameMetrics {
+    pub fn of(e: &FrameEval) -> FrameMetrics {
+        FrameMetrics {
+            id: e.id.clone(),
+            time: e.time,
+            psnr: e.values.psnr,
+            ssim: e.values.ssim,
+            ap: e.ap,
+            drc: e.drc,
+        }
+    }
+}
+
+/// MMAP (when any frame has a mask) and mean DRC of evaluated frames.
+pub fn motion_means(per: &[FrameEval]) -> (Option<f64>, Option<f64>) {
+    let any_mask = per.iter().any(|e| e.has_mask);
+    let mmap = if any_mask {
+        crate::kernels::metrics::mmap(per.iter().map(|e| e.ap))
+    } else {
+        None
+    };
+    let drcs: Vec<f64> = per.iter().filter_map(|e| e.drc).collect();
+    let drc = (!drcs.is_empty()).then(|| mean(&drcs));
+    (mmap, drc)
 }
 
 /// Where the built-in scene is cached: `$XDG_CACHE_HOME` or `~/.cache`, else `./.cache`.
@@ -158,6 +199,7 @@ pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
     c.motion_normalize = a.motion_normalize.unwrap_or(c.motion_normalize);
     c.pair_gap = a.pair_gap.unwrap_or(c.pair_gap);
     c.flow_preset = a.flow_preset.clone().unwrap_or(c.flow_preset);
+    c.motion_order = a.motion_order.unwrap_or(c.motion_order);
     c.validate()?;
     Ok(c)
 }
@@ -224,9 +266,9 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
     );
     let initial_psnr = if tr.iteration == 0 {
         Some(mean(
-            &tr.evaluate(None)?
+            &tr.evaluate(false)?
                 .iter()
-                .map(|v| v.1.psnr)
+                .map(|v| v.values.psnr)
                 .collect::<Vec<_>>(),
         ))
     } else {
@@ -292,39 +334,44 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
     pb.finish_and_clear();
 
     let renders = out.join("renders");
-    let per = tr.evaluate(Some(&renders))?;
+    let per = tr.evaluate(true)?;
+    for (i, e) in per.iter().enumerate() {
+        if let Some(im) = &e.images {
+            let path = renders.join(format!("{i:03}_{}.png", super::sanitize(&e.id)));
+            super::save_side_by_side(&path, im.width, im.height, &[&im.render, &im.gt])?;
+        }
+    }
+    let (mmap, drc) = motion_means(&per);
     let g = tr.gaussians()?;
     write_ply(&out.join("point_cloud.ply"), &g)?;
     let mlp: Vec<f32> = gpu.read(tr.mlp_params.all())?;
     write_atomic(&out.join("deform.bin"), bytemuck::cast_slice(&mlp))?;
     let metrics = Metrics {
-        psnr: mean(&per.iter().map(|v| v.1.psnr).collect::<Vec<_>>()),
-        ssim: mean(&per.iter().map(|v| v.1.ssim).collect::<Vec<_>>()),
-        l1: mean(&per.iter().map(|v| v.1.l1).collect::<Vec<_>>()),
+        psnr: mean(&per.iter().map(|v| v.values.psnr).collect::<Vec<_>>()),
+        ssim: mean(&per.iter().map(|v| v.values.ssim).collect::<Vec<_>>()),
+        l1: mean(&per.iter().map(|v| v.values.l1).collect::<Vec<_>>()),
         initial_psnr,
         iterations: tr.iteration,
         num_gaussians: tr.n,
         ms_per_step: crate::bench::median(step_ms),
+        mmap,
+        drc,
         device: gpu.info.to_string(),
         dataset: data_dir.display().to_string(),
-        per_frame: per
-            .iter()
-            .map(|(id, v)| FrameMetrics {
-                id: id.clone(),
-                psnr: v.psnr,
-                ssim: v.ssim,
-            })
-            .collect(),
+        per_frame: per.iter().map(FrameMetrics::of).collect(),
     };
     let text = serde_json::to_string_pretty(&metrics).expect("metrics serialise");
     write_atomic(&out.join("metrics.json"), text.as_bytes())?;
+    let fmt = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.4}"));
     println!(
-        "test PSNR {:.2} dB (initial {}), SSIM {:.4}, {} Gaussians, {:.1} ms/step; outputs in {}",
+        "test PSNR {:.2} dB (initial {}), SSIM {:.4}, MMAP {}, DRC {}, {} Gaussians, {:.1} ms/step; outputs in {}",
         metrics.psnr,
         metrics
             .initial_psnr
             .map_or("not measured: resumed".into(), |p| format!("{p:.2}")),
         metrics.ssim,
+        fmt(metrics.mmap),
+        fmt(metrics.drc),
         metrics.num_gaussians,
         metrics.ms_per_step,
         out.display()

@@ -120,6 +120,23 @@ pub struct TrainConfig {
     pub pair_gap: u32,
     /// Optical-flow preset: "fast", "default" or "accurate".
     pub flow_preset: String,
+    /// Motion decomposition order: direct (intermediate (v1, t2), the paper's) or reverse
+    /// (intermediate (v2, t1), the ablation).
+    #[serde(default)]
+    pub motion_order: MotionOrder,
+}
+
+/// Which intermediate image separates scene motion from camera motion (DESIGN §2).
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum MotionOrder {
+    /// (v1,t1) → (v1,t2) → (v2,t2): scene motion under the photometrically supervised view.
+    #[default]
+    Direct,
+    /// (v1,t1) → (v2,t1) → (v2,t2): scene motion under the pair's view (ablation).
+    Reverse,
 }
 
 impl Default for TrainConfig {
@@ -166,11 +183,12 @@ impl TrainConfig {
             densify: DensifyConfig::default(),
             log_interval: 100,
             checkpoint_interval: 2000,
-            motion_weight: 0.0,
+            motion_weight: 0.1,
             motion_start: 10_000,
             motion_normalize: crate::kernels::motion::NormMode::MinMax,
             pair_gap: 1,
             flow_preset: "default".into(),
+            motion_order: MotionOrder::Direct,
         }
     }
 

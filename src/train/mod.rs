@@ -15,6 +15,7 @@ use crate::kernels::densify::{Densifier, DensifyBuffers, DensifySettings, Gaussi
 use crate::kernels::dispflow::DispFlow;
 use crate::kernels::flow::{FlowConfig, FlowEstimator, FlowScratch, TvL1Flow};
 use crate::kernels::loss::{LossBuffers, LossValues, PhotometricLoss};
+use crate::kernels::metrics::{MetricBuffers, MotionMetrics};
 use crate::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
 use crate::kernels::motion::{MotionNorm, NormBuffers, NormConfig};
 use crate::kernels::raster::{
@@ -25,7 +26,7 @@ use crate::model::gaussians::{GaussianLayout, HostGaussians, Section};
 use crate::model::optim::{AdamHyper, ExpLr};
 use crate::vk::{Buffer, Gpu, Recorder, Timings};
 use checkpoint::Checkpoint;
-use config::{Background, TrainConfig};
+use config::{Background, MotionOrder, TrainConfig};
 
 /// A frame on the GPU: raster camera, time and the target image as [H·W] vec4.
 pub struct GpuFrame {
@@ -33,6 +34,10 @@ pub struct GpuFrame {
     pub camera: Camera,
     pub time: f32,
     pub target: Buffer,
+    /// Motion mask as [H·W] u32 (moving = 1) with its host copy, when the dataset has one.
+    pub mask: Option<(Buffer, Vec<u8>)>,
+    /// The latest earlier time of any frame in the dataset (the MMAP/DRC predecessor `t−1`).
+    pub prev_time: Option<f32>,
 }
 
 /// Converts a loaded camera (OpenCV, glam) to the rasteriser's.
@@ -55,7 +60,15 @@ pub fn raster_camera(c: &crate::data::camera::Camera, near: f32) -> Camera {
     }
 }
 
-fn upload_frame(gpu: &Gpu, f: &Frame, near: f32) -> Result<GpuFrame> {
+/// Uploads a frame; `times` (of every frame) give its predecessor. Only evaluation frames
+/// (`with_mask`) carry their motion mask: training never reads it.
+fn upload_frame(
+    gpu: &Gpu,
+    f: &Frame,
+    near: f32,
+    times: &[f32],
+    with_mask: bool,
+) -> Result<GpuFrame> {
     let px = (f.image.width * f.image.height) as usize;
     if f.image.data.len() != 3 * px {
         return Err(Error::Invalid(format!(
@@ -71,11 +84,27 @@ fn upload_frame(gpu: &Gpu, f: &Frame, near: f32) -> Result<GpuFrame> {
         .chunks_exact(3)
         .map(|c| [c[0], c[1], c[2], 1.0])
         .collect();
+    let mask = match f.mask.as_ref().filter(|_| with_mask) {
+        Some(m) if m.len() == px => {
+            let words: Vec<u32> = m.iter().map(|&v| (v != 0) as u32).collect();
+            Some((gpu.buffer_from(&format!("mask {}", f.id), &words)?, m.clone()))
+        }
+        Some(m) if !m.is_empty() => {
+            return Err(Error::Invalid(format!(
+                "{}: motion mask holds {} values, expected {px}",
+                f.image_path.display(),
+                m.len()
+            )))
+        }
+        _ => None,
+    };
     Ok(GpuFrame {
         id: f.id.clone(),
         camera: raster_camera(&f.camera, near),
         time: f.time,
         target: gpu.buffer_from(&format!("target {}", f.id), &rgba)?,
+        mask,
+        prev_time: times.iter().copied().filter(|&t| t < f.time).reduce(f32::max),
     })
 }
 
@@ -171,6 +200,9 @@ struct MotionState {
     delta: Buffer,
     drawn2: [Buffer; 3],
     inter: RasterBuffers,
+    /// Zero colour gradients of the intermediate render (reverse order: it is supervised
+    /// through its displacement-flow channels only).
+    zero_rgba: Option<Buffer>,
     flow: TvL1Flow,
     flow_scratch: FlowScratch,
     scene_flow: Buffer,
@@ -185,6 +217,51 @@ struct MotionState {
     /// Training frames sorted by time (indices into `frames`) and each frame's rank in it.
     by_time: Vec<usize>,
     rank: Vec<usize>,
+}
+
+/// Buffers of evaluation (renders with the displacement flow, the frozen render, motion
+/// metrics), allocated on the first `evaluate`.
+struct EvalState {
+    bufs: RasterBuffers,
+    deform_prev: Buffer,
+    delta: Buffer,
+    drawn_prev: [Buffer; 3],
+    full: Buffer,
+    dispflow: DispFlow,
+    norm: MotionNorm,
+    norm_bufs: NormBuffers,
+    metrics: MotionMetrics,
+    metric_bufs: MetricBuffers,
+    flags: Buffer,
+}
+
+/// One evaluated validation frame.
+#[derive(Clone, Debug)]
+pub struct FrameEval {
+    pub id: String,
+    pub time: f32,
+    /// Photometric values of the render at the frame's view and time.
+    pub values: LossValues,
+    /// Whether the frame has a motion mask with at least one moving pixel.
+    pub has_mask: bool,
+    /// AP of the normalised displacement flow against the mask (`None`: no mask, an empty
+    /// mask, or no earlier time in the dataset).
+    pub ap: Option<f64>,
+    /// DRC (`None` without an earlier time).
+    pub drc: Option<f64>,
+    pub images: Option<FrameImages>,
+}
+
+/// Pictures of one evaluated frame (host copies).
+#[derive(Clone, Debug)]
+pub struct FrameImages {
+    pub width: u32,
+    pub height: u32,
+    pub render: Vec<[f32; 4]>,
+    pub gt: Vec<[f32; 4]>,
+    /// Min-max normalised displacement-flow magnitude F̂ ∈ [0, 1] (zeros without `t−1`).
+    pub motion: Vec<f32>,
+    pub mask: Option<Vec<u8>>,
 }
 
 /// Everything the training step reads and writes, allocated once for the Gaussian budget.
@@ -229,6 +306,7 @@ pub struct Trainer<'g> {
     time_interval: f32,
     time_noise: bool,
     motion: Option<MotionState>,
+    eval: Option<EvalState>,
     /// Iterations completed.
     pub iteration: u32,
 }
@@ -281,15 +359,16 @@ impl<'g> Trainer<'g> {
             time,
         };
         let near = data.near_far.map_or(0.01, |(n, _)| (0.5 * n).max(1e-3));
+        let times: Vec<f32> = data.frames().map(|f| f.time).collect();
         let frames = data
             .train
             .iter()
-            .map(|f| upload_frame(gpu, f, near))
+            .map(|f| upload_frame(gpu, f, near, &times, false))
             .collect::<Result<Vec<_>>>()?;
         let val = data
             .val
             .iter()
-            .map(|f| upload_frame(gpu, f, near))
+            .map(|f| upload_frame(gpu, f, near, &times, true))
             .collect::<Result<Vec<_>>>()?;
 
         let points: Vec<[f32; 3]> = data.points.positions.iter().map(|p| p.to_array()).collect();
@@ -339,9 +418,11 @@ impl<'g> Trainer<'g> {
             isect_capacity: (4 * host.len() as u32).max(1 << 16),
         };
         let motion_on = cfg.motion_weight > 0.0;
-        // The displacement flow needs 3 feature channels; without the motion term none.
+        let reverse = cfg.motion_order == MotionOrder::Reverse;
+        // The displacement flow needs 3 feature channels in the render that splats it: the
+        // photometric one (direct order) or the intermediate (reverse); none without motion.
         let size = RasterSize {
-            feature_dims: if motion_on { 3 } else { 0 },
+            feature_dims: if motion_on && !reverse { 3 } else { 0 },
             ..size
         };
         let raster_bufs = raster.buffers(gpu, &size)?;
@@ -377,10 +458,15 @@ impl<'g> Trainer<'g> {
                 inter: raster.buffers(
                     gpu,
                     &RasterSize {
-                        feature_dims: 0,
+                        feature_dims: if reverse { 3 } else { 0 },
                         ..size
                     },
                 )?,
+                zero_rgba: if reverse {
+                    Some(gpu.buffer_from("zero rgba grads", &vec![[0f32; 4]; px as usize])?)
+                } else {
+                    None
+                },
                 flow_scratch: flow.scratch(gpu, w, h)?,
                 flow,
                 scene_flow: gpu.buffer("scene flow", px * 8)?,
@@ -455,6 +541,7 @@ impl<'g> Trainer<'g> {
             time_interval: 1.0 / distinct_times as f32,
             time_noise,
             motion,
+            eval: None,
             iteration: 0,
         })
     }
@@ -586,8 +673,23 @@ impl<'g> Trainer<'g> {
                 self.raster_bufs.overflow_flag(),
                 self.step_flags.slice(0, 8),
             );
+            if let Some(m) = self.motion.as_ref().filter(|_| motion_w > 0.0) {
+                rec.copy(m.inter.overflow_flag(), self.step_flags.slice(8, 8));
+            }
             let timings = rec.finish()?;
             let flags: Vec<u32> = self.step_flags.read_mapped();
+            if let Some(m) = self.motion.as_mut().filter(|_| motion_w > 0.0 && flags[2] != 0) {
+                // A truncated intermediate render fed this step's flow (the optimiser step is
+                // guarded by the main render only); later steps get room for it.
+                let need = flags[3].saturating_add(flags[3] / 4);
+                m.inter = self.raster.buffers(
+                    self.gpu,
+                    &RasterSize {
+                        isect_capacity: need,
+                        ..m.inter.size()
+                    },
+                )?;
+            }
             if flags[0] != 0 {
                 let grown = flags[1].saturating_add(flags[1] / 4).max(flags[1]);
                 self.raster_bufs = self.raster.buffers(
@@ -705,18 +807,24 @@ impl<'g> Trainer<'g> {
             self.d_drawn_dummy.all(),
             &drawn,
         );
-        let drawn2 = drawn_of(&m.drawn2);
-        self.deform.forward(
-            rec,
-            self.n,
-            &canon,
-            Some(m.deform_out2.all()),
-            self.d_drawn_dummy.all(),
-            &drawn2,
-        );
+        if self.cfg.motion_order == MotionOrder::Direct {
+            // Only the direct order draws the Gaussians at t2 (its intermediate render).
+            let drawn2 = drawn_of(&m.drawn2);
+            self.deform.forward(
+                rec,
+                self.n,
+                &canon,
+                Some(m.deform_out2.all()),
+                self.d_drawn_dummy.all(),
+                &drawn2,
+            );
+        }
+        let reverse = self.cfg.motion_order == MotionOrder::Reverse;
         rec.set_zone("raster");
         let mut g = splat_inputs(&self.layout, &self.params, &self.drawn, self.n, sh_degree);
-        g.features = Some((m.delta.all(), 3));
+        if !reverse {
+            g.features = Some((m.delta.all(), 3));
+        }
         self.raster.forward(rec, &self.raster_bufs, &cam, &g, opts);
         rec.set_zone("loss");
         let target = self.frames[fi].target.all();
@@ -729,21 +837,32 @@ impl<'g> Trainer<'g> {
             self.cfg.lambda_ssim,
         );
         rec.set_zone("intermediate");
-        let g2 = splat_inputs(&self.layout, &self.params, &m.drawn2, self.n, sh_degree);
-        self.raster.forward(rec, &m.inter, &cam, &g2, opts);
+        // Direct: (v1, t2) without gradient, scene motion = flow(I_a → it) under v1.
+        // Reverse: (v2, t1) splatting δ, scene motion = flow(it → I_b) under v2.
+        let (g_inter, cam_inter) = if reverse {
+            let mut gi = splat_inputs(&self.layout, &self.params, &self.drawn, self.n, sh_degree);
+            gi.features = Some((m.delta.all(), 3));
+            (gi, self.frames[fj].camera)
+        } else {
+            let g2 = splat_inputs(&self.layout, &self.params, &m.drawn2, self.n, sh_degree);
+            (g2, cam)
+        };
+        self.raster
+            .forward(rec, &m.inter, &cam_inter, &g_inter, opts);
         rec.set_zone("flow");
-        m.flow.record(
-            rec,
-            &m.flow_scratch,
-            target,
-            m.inter.out_rgba.all(),
-            m.scene_flow.all(),
-        );
+        let (from, to) = if reverse {
+            (m.inter.out_rgba.all(), self.frames[fj].target.all())
+        } else {
+            (target, m.inter.out_rgba.all())
+        };
+        m.flow
+            .record(rec, &m.flow_scratch, from, to, m.scene_flow.all());
         rec.set_zone("motion");
+        let disp_render = if reverse { &m.inter } else { &self.raster_bufs };
         m.norm.record(
             rec,
             &mut m.norm_disp,
-            self.raster_bufs.out_features.all(),
+            disp_render.out_features.all(),
             m.norm_cfg,
         );
         m.norm
@@ -773,7 +892,7 @@ impl<'g> Trainer<'g> {
         m.norm.record_backward(
             rec,
             &m.norm_disp,
-            self.raster_bufs.out_features.all(),
+            disp_render.out_features.all(),
             m.d_mhat.all(),
             m.d_feat.all(),
         );
@@ -781,18 +900,33 @@ impl<'g> Trainer<'g> {
         let d = OutputGrads {
             rgba: self.d_render.all(),
             depth: self.zero_depth.all(),
-            features: Some(m.d_feat.all()),
+            features: (!reverse).then(|| m.d_feat.all()),
         };
         self.raster
             .backward(rec, &self.raster_bufs, &cam, &g, opts, &d);
+        if let Some(zero) = &m.zero_rgba {
+            // Reverse order: the motion loss reaches the MLP through δ only; the blend-weight
+            // gradients of the intermediate render are not added to the Gaussians.
+            let d = OutputGrads {
+                rgba: zero.all(),
+                depth: self.zero_depth.all(),
+                features: Some(m.d_feat.all()),
+            };
+            self.raster
+                .backward(rec, &m.inter, &cam_inter, &g_inter, opts, &d);
+        }
         rec.set_zone("deform bwd");
         self.record_grads_to_params(rec, true);
         let m = self.motion.as_ref().expect("motion state");
-        let rb = &self.raster_bufs;
+        let d_delta = if reverse {
+            m.inter.d_features.all()
+        } else {
+            self.raster_bufs.d_features.all()
+        };
         m.dispflow.displacement_bwd(
             rec,
             self.n,
-            rb.d_features.all(),
+            d_delta,
             self.d_deform.all(),
             m.d_deform2.all(),
         );
@@ -995,40 +1129,182 @@ impl Trainer<'_> {
             .render_checked(self.gpu, &mut self.raster_bufs, camera, &g, &opts)
     }
 
-    /// PSNR / SSIM / L1 of every validation frame (black background), optionally writing
-    /// `render | ground truth` PNGs into `png_dir`.
-    pub fn evaluate(&mut self, png_dir: Option<&Path>) -> Result<Vec<(String, LossValues)>> {
-        let mut out = Vec::new();
+    /// Evaluates every validation frame at its view and time (black background): PSNR, SSIM
+    /// and L1 of the render; with a predecessor time `t−1` in the dataset, the displacement
+    /// flow δ = dx(t) − dx(t−1) splatted with the weights of the render at `(v, t)`, min-max
+    /// normalised, scored against the frame's motion mask (AP, for MMAP) and DRC against the
+    /// frozen render `(v, D(t−1))`. `want_images` also reads the pictures back.
+    pub fn evaluate(&mut self, want_images: bool) -> Result<Vec<FrameEval>> {
+        let mut out = Vec::with_capacity(self.val.len());
         for i in 0..self.val.len() {
-            let (cam, time, id) = (self.val[i].camera, self.val[i].time, self.val[i].id.clone());
-            self.render(&cam, time, [0.0; 3])?;
+            out.push(self.evaluate_frame(i, want_images)?);
+        }
+        Ok(out)
+    }
+
+    fn eval_state(&mut self) -> Result<&mut EvalState> {
+        if self.eval.is_none() {
+            let gpu = self.gpu;
+            let cap = self.layout.capacity as u64;
+            let size = RasterSize {
+                feature_dims: 3,
+                ..self.raster_bufs.size()
+            };
+            let (w, h) = (size.width, size.height);
+            let norm = MotionNorm::new(gpu)?;
+            let metrics = MotionMetrics::new(gpu)?;
+            self.eval = Some(EvalState {
+                bufs: self.raster.buffers(gpu, &size)?,
+                deform_prev: gpu.buffer("eval deformation t-1", cap * 40)?,
+                delta: gpu.buffer("eval displacement", cap * 12)?,
+                drawn_prev: [
+                    gpu.buffer("eval drawn means t-1", cap * 12)?,
+                    gpu.buffer("eval drawn scales t-1", cap * 12)?,
+                    gpu.buffer("eval drawn quats t-1", cap * 16)?,
+                ],
+                full: gpu.buffer("eval full render", (w * h) as u64 * 16)?,
+                dispflow: DispFlow::new(gpu)?,
+                norm_bufs: norm.buffers(gpu, w, h, 3)?,
+                norm,
+                metric_bufs: metrics.buffers(gpu, w, h)?,
+                metrics,
+                flags: gpu.host_buffer("eval overflow flags", 16)?,
+            });
+        }
+        Ok(self.eval.as_mut().expect("just allocated"))
+    }
+
+    fn evaluate_frame(&mut self, i: usize, want_images: bool) -> Result<FrameEval> {
+        let active = self.deform_active(self.iteration.max(1));
+        let deg = self.sh_degree_at(self.iteration.max(1));
+        let opts = RenderOpts {
+            background: [0.0; 3],
+            alpha_max: 0.99,
+        };
+        self.eval_state()?;
+        let f = &self.val[i];
+        let (cam, t, prev) = (f.camera, f.time, f.prev_time);
+        let px = (cam.width * cam.height) as u64;
+        loop {
+            let e = self.eval.as_mut().expect("eval state");
             let mut rec = Recorder::new(self.gpu)?;
+            let means = self.layout.slice(&self.params, Section::Means, self.n);
+            let canon = canonical(&self.layout, &self.params, self.n);
+            if active {
+                let mut fwd = |time: f32, dst: &Buffer| {
+                    let (b, p) = (&self.mlp_bufs, self.mlp_params.all());
+                    let tm = MlpTime::Batch(time);
+                    self.mlp.forward(&mut rec, b, self.n, means, tm, p, dst.all());
+                };
+                fwd(t, &self.deform_out);
+                if let Some(tp) = prev {
+                    fwd(tp, &e.deform_prev);
+                }
+            }
+            let dummy = self.d_drawn_dummy.all();
+            let d = active.then(|| self.deform_out.all());
+            let drawn = drawn_of(&self.drawn);
+            self.deform.forward(&mut rec, self.n, &canon, d, dummy, &drawn);
+            let mut g = splat_inputs(&self.layout, &self.params, &self.drawn, self.n, deg);
+            if prev.is_some() {
+                if active {
+                    let (a, b) = (e.deform_prev.all(), self.deform_out.all());
+                    e.dispflow
+                        .displacement(&mut rec, self.n, a, b, e.delta.all());
+                } else {
+                    // No deformation yet: D ≡ 0 at every time, δ = 0.
+                    rec.fill(e.delta.all(), 0);
+                }
+                let d = active.then(|| e.deform_prev.all());
+                let drawn_prev = drawn_of(&e.drawn_prev);
+                self.deform
+                    .forward(&mut rec, self.n, &canon, d, dummy, &drawn_prev);
+                g.features = Some((e.delta.all(), 3));
+            }
+            self.raster.forward(&mut rec, &e.bufs, &cam, &g, &opts);
+            rec.copy(e.bufs.overflow_flag(), e.flags.slice(0, 8));
+            let target = self.val[i].target.all();
             self.loss.record(
                 &mut rec,
                 &mut self.loss_bufs,
-                self.raster_bufs.out_rgba.all(),
-                self.val[i].target.all(),
+                e.bufs.out_rgba.all(),
+                target,
                 self.d_render.all(),
                 self.cfg.lambda_ssim,
             );
-            rec.finish()?;
-            out.push((id.clone(), self.loss_bufs.values(self.gpu)?));
-            if let Some(dir) = png_dir {
-                let render: Vec<[f32; 4]> = self.gpu.read(
-                    self.raster_bufs
-                        .out_rgba
-                        .elems::<[f32; 4]>(0, (cam.width * cam.height) as u64),
-                )?;
-                let gt: Vec<[f32; 4]> = self.gpu.read(self.val[i].target.all())?;
-                save_side_by_side(
-                    &dir.join(format!("{:03}_{}.png", i, sanitize(&id))),
-                    cam.width,
-                    cam.height,
-                    &[&render, &gt],
-                )?;
+            rec.copy(e.bufs.out_rgba.slice(0, px * 16), e.full.slice(0, px * 16));
+            if prev.is_some() {
+                let feat = e.bufs.out_features.all();
+                e.norm
+                    .record(&mut rec, &mut e.norm_bufs, feat, NormConfig::default());
+                if let Some((mask, _)) = &self.val[i].mask {
+                    let m_hat = e.norm_bufs.m_hat();
+                    e.metrics
+                        .record_ap(&mut rec, &e.metric_bufs, m_hat, mask.all());
+                }
+                // The frozen render: the same view with the deformation of t−1.
+                let g_prev =
+                    splat_inputs(&self.layout, &self.params, &e.drawn_prev, self.n, deg);
+                self.raster.forward(&mut rec, &e.bufs, &cam, &g_prev, &opts);
+                rec.copy(e.bufs.overflow_flag(), e.flags.slice(8, 8));
+                e.metrics.record_drc(
+                    &mut rec,
+                    &e.metric_bufs,
+                    e.norm_bufs.m_hat(),
+                    e.bufs.out_rgba.all(),
+                    e.full.all(),
+                    target,
+                );
             }
+            rec.finish()?;
+            let flags: Vec<u32> = e.flags.read_mapped();
+            if flags[0] != 0 || (prev.is_some() && flags[2] != 0) {
+                let need = flags[1].max(if prev.is_some() { flags[3] } else { 0 });
+                let grown = need.saturating_add(need / 4).max(need);
+                e.bufs = self.raster.buffers(
+                    self.gpu,
+                    &RasterSize {
+                        isect_capacity: grown,
+                        ..e.bufs.size()
+                    },
+                )?;
+                continue;
+            }
+            let f = &self.val[i];
+            let values = self.loss_bufs.values(self.gpu)?;
+            let ap = match (&f.mask, prev) {
+                (Some(_), Some(_)) => e.metric_bufs.ap(self.gpu)?,
+                _ => None,
+            };
+            let drc = prev.map(|_| e.metric_bufs.drc(self.gpu)).transpose()?;
+            let images = if want_images {
+                let render: Vec<[f32; 4]> = self.gpu.read(e.full.elems::<[f32; 4]>(0, px))?;
+                let gt: Vec<[f32; 4]> = self.gpu.read(f.target.elems::<[f32; 4]>(0, px))?;
+                let motion = match prev {
+                    Some(_) => self.gpu.read(e.norm_bufs.m_hat())?,
+                    None => vec![0.0; px as usize],
+                };
+                Some(FrameImages {
+                    width: cam.width,
+                    height: cam.height,
+                    render,
+                    gt,
+                    motion: motion[..px as usize].to_vec(),
+                    mask: f.mask.as_ref().map(|m| m.1.clone()),
+                })
+            } else {
+                None
+            };
+            return Ok(FrameEval {
+                id: f.id.clone(),
+                time: t,
+                values,
+                has_mask: f.mask.as_ref().is_some_and(|m| m.1.iter().any(|&v| v != 0)),
+                ap,
+                drc,
+                images,
+            });
         }
-        Ok(out)
     }
 
     /// Canonical Gaussians on the host (rows 0..n).
@@ -1156,7 +1432,7 @@ fn splat_inputs<'a>(
     }
 }
 
-fn sanitize(id: &str) -> String {
+pub(crate) fn sanitize(id: &str) -> String {
     id.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
