@@ -12,5 +12,8 @@
 //! machines and never needs the GPU.
 
 pub mod colormap;
+mod draw;
+pub mod text;
 
 pub use colormap::{error_map, heatmap, mask_image, rgb_image, ERROR_FULL_SCALE};
+pub use text::{draw_text, text_width};
