@@ -15,9 +15,11 @@ pub mod colormap;
 mod draw;
 pub mod plot;
 pub mod strip;
+pub mod table;
 pub mod text;
 
 pub use colormap::{error_map, heatmap, mask_image, rgb_image, ERROR_FULL_SCALE};
 pub use plot::{stacked, Plot, Series, PALETTE};
 pub use strip::{labelled_strip, save_png};
+pub use table::{fmt_metric, Table};
 pub use text::{draw_text, text_width};
