@@ -18,8 +18,9 @@ pub const PALETTE: [[u8; 3]; 6] = [
     [140, 86, 75],
 ];
 
-/// Smallest image that still leaves room for tick labels around a visible plot area.
+/// Narrowest plot that still leaves room for tick labels beside a visible plot area.
 pub const MIN_WIDTH: u32 = 120;
+/// Lowest plot that still leaves room for the title and x labels around a visible plot area.
 pub const MIN_HEIGHT: u32 = 80;
 
 const WHITE: [u8; 3] = [255, 255, 255];
