@@ -20,6 +20,13 @@ pub struct Cli {
 pub enum Command {
     /// Train a deformable Gaussian model (default: the built-in synthetic scene, fast preset).
     Train(dispflow_vk::train::cli::TrainArgs),
+    /// Evaluate trained runs on their test split: metrics JSON, Markdown table, picture strips,
+    /// per-frame and training plots (into RUN/eval/).
+    Eval(dispflow_vk::train::eval::EvalArgs),
+    /// Render a trained run along a camera path (test cameras, a fixed camera over time, an
+    /// orbit or a spiral) to PNGs, optionally with the displacement-flow heatmap and per-frame
+    /// 3DGS .ply exports.
+    Render(dispflow_vk::train::eval::RenderArgs),
     /// List the Vulkan devices and the limits that matter to the kernels.
     Devices,
     /// Time the GPU kernels (sort, scan) with GPU timestamps and print a table.

@@ -12,6 +12,12 @@ fn main() -> anyhow::Result<()> {
         cli::Command::Train(args) => {
             dispflow_vk::train::cli::run(&args)?;
         }
+        cli::Command::Eval(args) => {
+            dispflow_vk::train::eval::run_eval(&args)?;
+        }
+        cli::Command::Render(args) => {
+            dispflow_vk::train::eval::run_render(&args)?;
+        }
         cli::Command::Devices => {
             for (i, (name, kind)) in dispflow_vk::vk::list_devices()?.iter().enumerate() {
                 println!("{i}: {name} ({kind})");

@@ -12,27 +12,7 @@ use train_common::{tiny_config, tiny_scene};
 mod train_common;
 
 fn args() -> TrainArgs {
-    TrainArgs {
-        data: None,
-        out: None,
-        preset: None,
-        config: None,
-        iterations: None,
-        resume: false,
-        max_resolution: None,
-        sh_degree: None,
-        mlp_width: None,
-        mlp_depth: None,
-        budget: None,
-        background: None,
-        seed: None,
-        motion_weight: None,
-        motion_start: None,
-        motion_normalize: None,
-        pair_gap: None,
-        flow_preset: None,
-        verbose: false,
-    }
+    TrainArgs::default()
 }
 
 #[test]

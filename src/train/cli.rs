@@ -13,7 +13,7 @@ use crate::data::{self, LoadOptions};
 use crate::error::{Error, Result};
 use crate::vk::Gpu;
 
-#[derive(clap::Args, Debug, Clone)]
+#[derive(clap::Args, Debug, Clone, Default)]
 pub struct TrainArgs {
     /// Dataset directory (nerfies or D-NeRF/blender format). Default: the built-in synthetic
     /// scene (small preset), generated once into the cache directory.
@@ -141,6 +141,34 @@ pub fn motion_means(per: &[FrameEval]) -> (Option<f64>, Option<f64>) {
     (mmap, drc)
 }
 
+/// How a run loads its dataset (resolution, background of transparent images, seed).
+pub fn load_options(cfg: &TrainConfig) -> LoadOptions {
+    let bg = match cfg.background {
+        Background::White => [1.0; 3],
+        _ => [0.0; 3],
+    };
+    LoadOptions {
+        max_size: (cfg.max_resolution > 0).then_some(cfg.max_resolution),
+        background: bg,
+        seed: cfg.seed,
+        ..LoadOptions::default()
+    }
+}
+
+/// One line of a run's `log.jsonl` (every `log_interval` iterations).
+#[derive(Debug, Serialize, serde::Deserialize)]
+pub struct LogLine {
+    pub iteration: u32,
+    pub loss: f64,
+    /// PSNR of the training view of that iteration.
+    pub psnr: f64,
+    pub num_gaussians: u32,
+    /// Motion weight α_t in force (0 before the motion term starts).
+    pub motion_weight: f32,
+    /// GPU milliseconds of the step (only with --verbose, else wall milliseconds).
+    pub ms: f64,
+}
+
 /// Where the built-in scene is cached: `$XDG_CACHE_HOME` or `~/.cache`, else `./.cache`.
 pub fn cache_dir() -> PathBuf {
     let base = std::env::var_os("XDG_CACHE_HOME")
@@ -226,17 +254,7 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(&name));
-    let bg = match cfg.background {
-        Background::White => [1.0; 3],
-        _ => [0.0; 3],
-    };
-    let opts = LoadOptions {
-        max_size: (cfg.max_resolution > 0).then_some(cfg.max_resolution),
-        background: bg,
-        seed: cfg.seed,
-        ..LoadOptions::default()
-    };
-    let dataset = data::load(&data_dir, &opts)?;
+    let dataset = data::load(&data_dir, &load_options(&cfg))?;
     let gpu = Gpu::new_default()?;
     eprintln!("device: {}", gpu.info);
     let mut tr = Trainer::new(&gpu, &cfg, &dataset)?;
@@ -284,6 +302,14 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
     pb.set_position(tr.iteration as u64);
     let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let mut step_ms = Vec::new();
+    let log_path = out.join("log.jsonl");
+    let mut log_file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(tr.iteration > 0)
+        .write(true)
+        .truncate(tr.iteration == 0)
+        .open(&log_path)
+        .map_err(io(&log_path))?;
     while tr.iteration < cfg.iterations {
         let log = (tr.iteration + 1) % cfg.log_interval == 0 || tr.iteration + 1 == cfg.iterations;
         let t0 = Instant::now();
@@ -302,6 +328,21 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
                 l.loss.loss, l.loss.psnr, l.num_gaussians
             );
             pb.set_message(msg.clone());
+            let line = LogLine {
+                iteration: l.iteration,
+                loss: l.loss.loss,
+                psnr: l.loss.psnr,
+                num_gaussians: l.num_gaussians,
+                motion_weight: tr.motion_weight_at(l.iteration),
+                ms: if a.verbose {
+                    l.timings.total_ms()
+                } else {
+                    *step_ms.last().expect("timed")
+                },
+            };
+            let text = serde_json::to_string(&line).expect("log line serialises");
+            std::io::Write::write_all(&mut log_file, format!("{text}\n").as_bytes())
+                .map_err(io(&log_path))?;
             if !tty {
                 eprintln!("[{}/{}] {msg}", l.iteration, cfg.iterations);
             }

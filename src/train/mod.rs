@@ -4,6 +4,7 @@
 pub mod checkpoint;
 pub mod cli;
 pub mod config;
+pub mod eval;
 
 use std::path::Path;
 
@@ -1137,7 +1138,7 @@ impl Trainer<'_> {
     pub fn evaluate(&mut self, want_images: bool) -> Result<Vec<FrameEval>> {
         let mut out = Vec::with_capacity(self.val.len());
         for i in 0..self.val.len() {
-            out.push(self.evaluate_frame(i, want_images)?);
+            out.push(self.evaluate_one(i, want_images)?);
         }
         Ok(out)
     }
@@ -1174,7 +1175,25 @@ impl Trainer<'_> {
         Ok(self.eval.as_mut().expect("just allocated"))
     }
 
-    fn evaluate_frame(&mut self, i: usize, want_images: bool) -> Result<FrameEval> {
+    /// Evaluates validation frame `i` (see [`Trainer::evaluate`]).
+    pub fn evaluate_one(&mut self, i: usize, want_images: bool) -> Result<FrameEval> {
+        let f = &self.val[i];
+        let (cam, t, prev) = (f.camera, f.time, f.prev_time);
+        self.render_motion(&cam, t, prev, Some(i), want_images)
+    }
+
+    /// Renders `(camera, t)` (black background) and, with `prev`, the displacement flow
+    /// δ = dx(t) − dx(prev) splatted with the same weights (min-max normalised magnitude). With
+    /// a validation frame `val` it also scores the render (photometric values, AP against its
+    /// mask, DRC against the frozen render `(camera, D(prev))`).
+    pub fn render_motion(
+        &mut self,
+        camera: &Camera,
+        t: f32,
+        prev: Option<f32>,
+        val: Option<usize>,
+        want_images: bool,
+    ) -> Result<FrameEval> {
         let active = self.deform_active(self.iteration.max(1));
         let deg = self.sh_degree_at(self.iteration.max(1));
         let opts = RenderOpts {
@@ -1182,8 +1201,7 @@ impl Trainer<'_> {
             alpha_max: 0.99,
         };
         self.eval_state()?;
-        let f = &self.val[i];
-        let (cam, t, prev) = (f.camera, f.time, f.prev_time);
+        let cam = *camera;
         let px = (cam.width * cam.height) as u64;
         loop {
             let e = self.eval.as_mut().expect("eval state");
@@ -1223,25 +1241,29 @@ impl Trainer<'_> {
             }
             self.raster.forward(&mut rec, &e.bufs, &cam, &g, &opts);
             rec.copy(e.bufs.overflow_flag(), e.flags.slice(0, 8));
-            let target = self.val[i].target.all();
-            self.loss.record(
-                &mut rec,
-                &mut self.loss_bufs,
-                e.bufs.out_rgba.all(),
-                target,
-                self.d_render.all(),
-                self.cfg.lambda_ssim,
-            );
+            let frame = val.map(|i| &self.val[i]);
+            if let Some(f) = frame {
+                self.loss.record(
+                    &mut rec,
+                    &mut self.loss_bufs,
+                    e.bufs.out_rgba.all(),
+                    f.target.all(),
+                    self.d_render.all(),
+                    self.cfg.lambda_ssim,
+                );
+            }
             rec.copy(e.bufs.out_rgba.slice(0, px * 16), e.full.slice(0, px * 16));
             if prev.is_some() {
                 let feat = e.bufs.out_features.all();
                 e.norm
                     .record(&mut rec, &mut e.norm_bufs, feat, NormConfig::default());
-                if let Some((mask, _)) = &self.val[i].mask {
+                if let Some((mask, _)) = frame.and_then(|f| f.mask.as_ref()) {
                     let m_hat = e.norm_bufs.m_hat();
                     e.metrics
                         .record_ap(&mut rec, &e.metric_bufs, m_hat, mask.all());
                 }
+            }
+            if let (Some(f), Some(_)) = (frame, prev) {
                 // The frozen render: the same view with the deformation of t−1.
                 let g_prev =
                     splat_inputs(&self.layout, &self.params, &e.drawn_prev, self.n, deg);
@@ -1253,13 +1275,14 @@ impl Trainer<'_> {
                     e.norm_bufs.m_hat(),
                     e.bufs.out_rgba.all(),
                     e.full.all(),
-                    target,
+                    f.target.all(),
                 );
             }
             rec.finish()?;
             let flags: Vec<u32> = e.flags.read_mapped();
-            if flags[0] != 0 || (prev.is_some() && flags[2] != 0) {
-                let need = flags[1].max(if prev.is_some() { flags[3] } else { 0 });
+            let frozen = prev.is_some() && val.is_some();
+            if flags[0] != 0 || (frozen && flags[2] != 0) {
+                let need = flags[1].max(if frozen { flags[3] } else { 0 });
                 let grown = need.saturating_add(need / 4).max(need);
                 e.bufs = self.raster.buffers(
                     self.gpu,
@@ -1270,16 +1293,26 @@ impl Trainer<'_> {
                 )?;
                 continue;
             }
-            let f = &self.val[i];
-            let values = self.loss_bufs.values(self.gpu)?;
-            let ap = match (&f.mask, prev) {
+            let frame = val.map(|i| &self.val[i]);
+            let values = match frame {
+                Some(_) => self.loss_bufs.values(self.gpu)?,
+                None => LossValues::new(f64::NAN, f64::NAN, f64::NAN, self.cfg.lambda_ssim as f64),
+            };
+            let mask = frame.and_then(|f| f.mask.as_ref());
+            let ap = match (mask, prev) {
                 (Some(_), Some(_)) => e.metric_bufs.ap(self.gpu)?,
                 _ => None,
             };
-            let drc = prev.map(|_| e.metric_bufs.drc(self.gpu)).transpose()?;
+            let drc = match frame.zip(prev) {
+                Some(_) => Some(e.metric_bufs.drc(self.gpu)?),
+                None => None,
+            };
             let images = if want_images {
                 let render: Vec<[f32; 4]> = self.gpu.read(e.full.elems::<[f32; 4]>(0, px))?;
-                let gt: Vec<[f32; 4]> = self.gpu.read(f.target.elems::<[f32; 4]>(0, px))?;
+                let gt: Vec<[f32; 4]> = match frame {
+                    Some(f) => self.gpu.read(f.target.elems::<[f32; 4]>(0, px))?,
+                    None => Vec::new(),
+                };
                 let motion = match prev {
                     Some(_) => self.gpu.read(e.norm_bufs.m_hat())?,
                     None => vec![0.0; px as usize],
@@ -1290,21 +1323,101 @@ impl Trainer<'_> {
                     render,
                     gt,
                     motion: motion[..px as usize].to_vec(),
-                    mask: f.mask.as_ref().map(|m| m.1.clone()),
+                    mask: mask.map(|m| m.1.clone()),
                 })
             } else {
                 None
             };
             return Ok(FrameEval {
-                id: f.id.clone(),
+                id: frame.map_or_else(|| format!("t{t:.4}"), |f| f.id.clone()),
                 time: t,
                 values,
-                has_mask: f.mask.as_ref().is_some_and(|m| m.1.iter().any(|&v| v != 0)),
+                has_mask: mask.is_some_and(|m| m.1.iter().any(|&v| v != 0)),
                 ap,
                 drc,
                 images,
             });
         }
+    }
+
+    /// Replaces the model by trained Gaussians and MLP weights (a run's `point_cloud.ply` and
+    /// `deform.bin`) as of `iteration` (which decides whether the deformation is active).
+    pub fn load_model(&mut self, g: &HostGaussians, mlp: &[f32], iteration: u32) -> Result<()> {
+        if mlp.len() != self.mlp.layout.total {
+            return Err(Error::Invalid(format!(
+                "deformation weights hold {} floats; this configuration's MLP ({}×{}) has {}",
+                mlp.len(),
+                self.cfg.mlp_depth,
+                self.cfg.mlp_width,
+                self.mlp.layout.total
+            )));
+        }
+        if g.sh_coeffs != self.layout.sh_coeffs {
+            return Err(Error::Invalid(format!(
+                "the Gaussians carry {} SH coefficients; the configuration (sh_degree {}) expects {}",
+                g.sh_coeffs, self.cfg.sh_degree, self.layout.sh_coeffs
+            )));
+        }
+        if g.len() > self.layout.capacity as usize {
+            return Err(Error::Capacity {
+                what: "Gaussian budget (loaded model)",
+                capacity: self.layout.capacity as u64,
+                asked: g.len() as u64,
+            });
+        }
+        if let Some(i) = (0..g.len()).find(|&i| {
+            let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+            !(finite(&g.means[i])
+                && finite(&g.log_scales[i])
+                && finite(&g.quats[i])
+                && g.opacity[i].is_finite()
+                && finite(&g.sh_dc[i]))
+        }) {
+            return Err(Error::Invalid(format!(
+                "Gaussian {i} has a non-finite parameter"
+            )));
+        }
+        if mlp.iter().any(|v| !v.is_finite()) {
+            return Err(Error::Invalid(
+                "deformation weights contain a non-finite value".into(),
+            ));
+        }
+        g.upload(self.gpu, &self.layout, &self.params)?;
+        self.gpu.upload(self.mlp_params.all(), mlp)?;
+        self.n = g.len() as u32;
+        self.iteration = iteration;
+        Ok(())
+    }
+
+    /// The Gaussians as drawn at time `t` (deformation applied) in the canonical layout: a
+    /// standard 3DGS model of that instant (log of |scale|: the rasteriser squares it).
+    pub fn deformed_gaussians(&mut self, t: f32) -> Result<HostGaussians> {
+        let active = self.deform_active(self.iteration.max(1));
+        let mut rec = Recorder::new(self.gpu)?;
+        self.record_deform(&mut rec, t, active);
+        rec.finish()?;
+        let mut g = self.gaussians()?;
+        let n = self.n as u64;
+        let means: Vec<[f32; 3]> = self.gpu.read(self.drawn[0].elems::<[f32; 3]>(0, n))?;
+        let scales: Vec<[f32; 3]> = self.gpu.read(self.drawn[1].elems::<[f32; 3]>(0, n))?;
+        let quats: Vec<[f32; 4]> = self.gpu.read(self.drawn[2].elems::<[f32; 4]>(0, n))?;
+        g.means = means[..n as usize].to_vec();
+        g.log_scales = scales[..n as usize]
+            .iter()
+            .map(|s| s.map(|v| v.abs().max(1e-12).ln()))
+            .collect();
+        g.quats = quats[..n as usize]
+            .iter()
+            .map(|q| {
+                let l = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+                if l > 1e-12 {
+                    q.map(|v| v / l)
+                } else {
+                    [1.0, 0.0, 0.0, 0.0]
+                }
+            })
+            .collect();
+        Ok(g)
     }
 
     /// Canonical Gaussians on the host (rows 0..n).

@@ -1,0 +1,274 @@
+//! `eval` and `render` on a tiny trained run: metrics JSON schema and values, the Markdown
+//! table, picture sizes, PLY exports that read back, and clear errors for broken runs.
+
+mod train_common;
+
+use std::path::{Path, PathBuf};
+
+use dispflow_vk::report::Table;
+use dispflow_vk::testing;
+use dispflow_vk::train::checkpoint::read_ply;
+use dispflow_vk::train::cli::TrainArgs;
+use dispflow_vk::train::eval::{
+    load_trainer, open_run, run_eval, run_render, CameraPath, EvalArgs, RenderArgs,
+};
+use train_common::tiny_scene;
+
+/// 60 iterations on the tiny scene: deformation from 20, motion term from 40, densification.
+const TINY_TOML: &str = r#"
+iterations = 60
+mlp_width = 16
+mlp_depth = 2
+warm_up = 20
+motion_start = 40
+flow_preset = "fast"
+sh_degree = 1
+sh_interval = 30
+log_interval = 10
+checkpoint_interval = 60
+[densify]
+from = 20
+until = 50
+interval = 25
+budget = 8000
+"#;
+
+fn train(data: &Path, out: &Path, motion_weight: f32) -> PathBuf {
+    let cfg = out.with_extension("toml");
+    std::fs::write(&cfg, TINY_TOML).unwrap();
+    let a = TrainArgs {
+        data: Some(data.to_path_buf()),
+        out: Some(out.to_path_buf()),
+        config: Some(cfg),
+        motion_weight: Some(motion_weight),
+        ..TrainArgs::default()
+    };
+    dispflow_vk::train::cli::run(&a).unwrap();
+    out.to_path_buf()
+}
+
+fn eval_args(runs: Vec<PathBuf>) -> EvalArgs {
+    EvalArgs {
+        run: runs,
+        data: None,
+        lpips_weights: None,
+        table: None,
+        no_pictures: false,
+    }
+}
+
+fn png_size(p: &Path) -> (u32, u32) {
+    let img = image::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    (img.width(), img.height())
+}
+
+fn pngs(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .collect();
+    v.sort();
+    v
+}
+
+// One test: every stage opens its own Vulkan device, and validated devices must not be
+// created from parallel threads (DESIGN §8).
+#[test]
+fn eval_and_render_a_tiny_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tiny_scene(tmp.path());
+    let motion = train(&data, &tmp.path().join("dispflow"), 0.1);
+    let base = train(&data, &tmp.path().join("baseline"), 0.0);
+    let log = std::fs::read_to_string(motion.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 6, "one log line per 10 iterations");
+
+    // --- eval, two runs, combined table ---
+    let table_path = tmp.path().join("combined.md");
+    let mut a = eval_args(vec![motion.clone(), base.clone()]);
+    a.table = Some(table_path.clone());
+    let reports = run_eval(&a).unwrap();
+    assert_eq!(reports.len(), 2);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(motion.join("eval/metrics.json")).unwrap())
+            .unwrap();
+    let train_metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(motion.join("metrics.json")).unwrap())
+            .unwrap();
+    let n_val = json["per_frame"].as_array().unwrap().len();
+    assert!(n_val >= 2, "the tiny scene has test frames");
+    let unit = |v: &serde_json::Value| v.as_f64().is_some_and(|x| (0.0..=1.0).contains(&x));
+    assert!(json["psnr"].as_f64().unwrap().is_finite());
+    assert!(unit(&json["ssim"]) && unit(&json["mmap"]) && unit(&json["drc"]));
+    assert!(json["lpips"].is_null());
+    assert!(json["lpips_note"].as_str().unwrap().contains("unavailable"));
+    assert!(json["method"].as_str().unwrap().starts_with("DispFlow-GS"));
+    // Re-evaluating the saved model reproduces the numbers training reported.
+    for k in ["psnr", "ssim", "mmap", "drc"] {
+        let (e, t) = (json[k].as_f64().unwrap(), train_metrics[k].as_f64().unwrap());
+        assert!((e - t).abs() < 1e-3, "{k}: eval {e} vs train {t}");
+    }
+    for f in json["per_frame"].as_array().unwrap() {
+        assert!(f["id"].is_string() && f["time"].is_number() && f["psnr"].is_number());
+        assert!(unit(&f["ssim"]) && f["has_mask"].is_boolean());
+        assert!(f["drc"].is_null() || unit(&f["drc"]));
+    }
+    let mean_psnr = json["per_frame"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["psnr"].as_f64().unwrap())
+        .sum::<f64>()
+        / n_val as f64;
+    assert!((mean_psnr - json["psnr"].as_f64().unwrap()).abs() < 1e-9);
+
+    let t = Table::parse_markdown(&std::fs::read_to_string(motion.join("eval/table.md")).unwrap())
+        .unwrap();
+    assert_eq!(t.rows.len(), 1);
+    assert_eq!(t.headers[0], "Method");
+    let col = |name: &str| t.headers.iter().position(|h| h.starts_with(name)).unwrap();
+    let psnr_cell: f64 = t.rows[0][col("PSNR")].parse().unwrap();
+    assert!((psnr_cell - json["psnr"].as_f64().unwrap()).abs() <= 0.005 + 1e-9);
+    assert_eq!(t.rows[0][col("LPIPS")], "n/a");
+    let combined = Table::parse_markdown(&std::fs::read_to_string(&table_path).unwrap()).unwrap();
+    assert_eq!(combined.rows.len(), 2);
+    assert!(combined.rows[1][0].starts_with("Deformable-3DGS"));
+
+    // Pictures: one strip per test frame (render, gt, error, flow, mask: 5 panels of 64×64
+    // with 2-px gaps under a 12-px label band), the per-frame and training plots.
+    let strips = pngs(&motion.join("eval/frames"));
+    assert_eq!(strips.len(), n_val);
+    for p in &strips {
+        assert_eq!(png_size(p), (5 * 64 + 4 * 2, 64 + 12), "{}", p.display());
+    }
+    assert_eq!(png_size(&motion.join("eval/per_frame.png")), (640, 480));
+    assert_eq!(png_size(&motion.join("eval/training.png")), (640, 600));
+
+    // --- render: test path with the flow heatmap and PLY exports ---
+    let out = tmp.path().join("render-test");
+    let written = run_render(&RenderArgs {
+        run: motion.clone(),
+        data: None,
+        path: CameraPath::Test,
+        time: None,
+        camera: None,
+        frames: 60,
+        flow: true,
+        ply: true,
+        out: Some(out.clone()),
+    })
+    .unwrap();
+    assert_eq!(written.len(), n_val);
+    for p in &written {
+        assert_eq!(png_size(p), (2 * 64 + 2, 64 + 12));
+    }
+    let canonical = read_ply(&out.join("ply/canonical.ply")).unwrap();
+    assert_eq!(canonical, read_ply(&motion.join("point_cloud.ply")).unwrap());
+    // A frame's PLY reads back as exactly the deformed Gaussians of its time.
+    let run = open_run(&motion, None).unwrap();
+    let gpu = testing::gpu();
+    let (_ds, mut tr) = load_trainer(&gpu, &run).unwrap();
+    let mut test: Vec<f32> = tr.val.iter().map(|f| f.time).collect();
+    test.sort_by(f32::total_cmp);
+    let g = tr.deformed_gaussians(test[1]).unwrap();
+    let back = read_ply(&out.join("ply/frame_0001.ply")).unwrap();
+    assert_eq!(back, g);
+    assert_eq!(back.len(), canonical.len());
+    assert_ne!(back.means, canonical.means, "the deformation moved Gaussians");
+    drop(tr);
+
+    // --- render: orbit with frozen time, fixed camera over time ---
+    for (path, frames, time, camera) in [
+        (CameraPath::Orbit, 4, Some(0.5), None),
+        (CameraPath::Spiral, 3, None, None),
+        (CameraPath::Fixed, 3, None, Some(0)),
+    ] {
+        let out = tmp.path().join(format!("render-{path:?}"));
+        let w = run_render(&RenderArgs {
+            run: motion.clone(),
+            data: None,
+            path,
+            time,
+            camera,
+            frames,
+            flow: false,
+            ply: false,
+            out: Some(out),
+        })
+        .unwrap();
+        assert_eq!(w.len(), frames as usize);
+        for p in &w {
+            assert_eq!(png_size(p), (64, 64));
+        }
+    }
+    let e = run_render(&RenderArgs {
+        run: motion.clone(),
+        data: None,
+        path: CameraPath::Fixed,
+        time: None,
+        camera: Some(999),
+        frames: 2,
+        flow: false,
+        ply: false,
+        out: Some(tmp.path().join("bad")),
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("--camera 999"), "{e}");
+
+    // A deform.bin of the wrong size is refused when the model loads.
+    let broken = tmp.path().join("broken");
+    copy_run(&motion, &broken);
+    std::fs::write(broken.join("deform.bin"), [0u8; 40]).unwrap();
+    let e = run_eval(&eval_args(vec![broken])).unwrap_err().to_string();
+    assert!(e.contains("deformation weights hold 10 floats"), "{e}");
+}
+
+fn copy_run(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for f in ["config.toml", "metrics.json", "point_cloud.ply", "deform.bin"] {
+        std::fs::copy(from.join(f), to.join(f)).unwrap();
+    }
+}
+
+#[test]
+fn broken_run_directories_give_clear_errors() {
+    // All of these fail before a device is opened.
+    let tmp = tempfile::tempdir().unwrap();
+    let missing = tmp.path().join("nope");
+    let e = run_eval(&eval_args(vec![missing])).unwrap_err().to_string();
+    assert!(e.contains("nope") && e.contains("not a directory"), "{e}");
+
+    let run = tmp.path().join("run");
+    std::fs::create_dir_all(&run).unwrap();
+    let e = open_run(&run, None).err().unwrap().to_string();
+    assert!(e.contains("config.toml") && e.contains("missing"), "{e}");
+
+    std::fs::write(run.join("config.toml"), "iterations = 5\n").unwrap();
+    std::fs::write(run.join("metrics.json"), "{ not json").unwrap();
+    let e = open_run(&run, None).err().unwrap().to_string();
+    assert!(e.contains("metrics.json"), "{e}");
+
+    std::fs::write(run.join("metrics.json"), r#"{"iterations": 5}"#).unwrap();
+    let e = open_run(&run, None).err().unwrap().to_string();
+    assert!(e.contains("dataset"), "{e}");
+
+    let data = tmp.path().join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    let e = open_run(&run, Some(&data)).err().unwrap().to_string();
+    assert!(e.contains("point_cloud.ply") && e.contains("missing"), "{e}");
+
+    std::fs::write(run.join("point_cloud.ply"), b"ply\nformat binary").unwrap();
+    std::fs::write(run.join("deform.bin"), [0u8; 8]).unwrap();
+    let e = open_run(&run, Some(&data)).err().unwrap().to_string();
+    assert!(e.contains("point_cloud.ply"), "{e}");
+
+    std::fs::write(run.join("config.toml"), "iterations = \"many\"\n").unwrap();
+    let e = open_run(&run, Some(&data)).err().unwrap().to_string();
+    assert!(e.contains("config.toml"), "{e}");
+
+    let mut a = eval_args(vec![run]);
+    a.lpips_weights = Some(tmp.path().join("alex.pth"));
+    let e = run_eval(&a).unwrap_err().to_string();
+    assert!(e.contains("alex.pth") && e.contains("LPIPS"), "{e}");
+}
