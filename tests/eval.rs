@@ -103,9 +103,13 @@ fn eval_and_render_a_tiny_run() {
     assert!(json["lpips"].is_null());
     assert!(json["lpips_note"].as_str().unwrap().contains("unavailable"));
     assert!(json["method"].as_str().unwrap().starts_with("DispFlow-GS"));
+    assert!(unit(&json["flow_mmap"]));
     // Re-evaluating the saved model reproduces the numbers training reported.
     for k in ["psnr", "ssim", "mmap", "drc"] {
-        let (e, t) = (json[k].as_f64().unwrap(), train_metrics[k].as_f64().unwrap());
+        let (e, t) = (
+            json[k].as_f64().unwrap(),
+            train_metrics[k].as_f64().unwrap(),
+        );
         assert!((e - t).abs() < 1e-3, "{k}: eval {e} vs train {t}");
     }
     for f in json["per_frame"].as_array().unwrap() {
@@ -134,12 +138,13 @@ fn eval_and_render_a_tiny_run() {
     assert_eq!(combined.rows.len(), 2);
     assert!(combined.rows[1][0].starts_with("Deformable-3DGS"));
 
-    // Pictures: one strip per test frame (render, gt, error, flow, mask: 5 panels of 64×64
+    // Pictures: one strip per test frame (render, gt, error, displacement flow, optical flow,
+    // mask: 6 panels of 64×64
     // with 2-px gaps under a 12-px label band), the per-frame and training plots.
     let strips = pngs(&motion.join("eval/frames"));
     assert_eq!(strips.len(), n_val);
     for p in &strips {
-        assert_eq!(png_size(p), (5 * 64 + 4 * 2, 64 + 12), "{}", p.display());
+        assert_eq!(png_size(p), (6 * 64 + 5 * 2, 64 + 12), "{}", p.display());
     }
     assert_eq!(png_size(&motion.join("eval/per_frame.png")), (640, 480));
     assert_eq!(png_size(&motion.join("eval/training.png")), (640, 600));
@@ -163,7 +168,10 @@ fn eval_and_render_a_tiny_run() {
         assert_eq!(png_size(p), (2 * 64 + 2, 64 + 12));
     }
     let canonical = read_ply(&out.join("ply/canonical.ply")).unwrap();
-    assert_eq!(canonical, read_ply(&motion.join("point_cloud.ply")).unwrap());
+    assert_eq!(
+        canonical,
+        read_ply(&motion.join("point_cloud.ply")).unwrap()
+    );
     // A frame's PLY reads back as exactly the deformed Gaussians of its time.
     let run = open_run(&motion, None).unwrap();
     let gpu = testing::gpu();
@@ -174,7 +182,10 @@ fn eval_and_render_a_tiny_run() {
     let back = read_ply(&out.join("ply/frame_0001.ply")).unwrap();
     assert_eq!(back, g);
     assert_eq!(back.len(), canonical.len());
-    assert_ne!(back.means, canonical.means, "the deformation moved Gaussians");
+    assert_ne!(
+        back.means, canonical.means,
+        "the deformation moved Gaussians"
+    );
     drop(tr);
 
     // --- render: orbit with frozen time, fixed camera over time ---
@@ -226,7 +237,12 @@ fn eval_and_render_a_tiny_run() {
 
 fn copy_run(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
-    for f in ["config.toml", "metrics.json", "point_cloud.ply", "deform.bin"] {
+    for f in [
+        "config.toml",
+        "metrics.json",
+        "point_cloud.ply",
+        "deform.bin",
+    ] {
         std::fs::copy(from.join(f), to.join(f)).unwrap();
     }
 }
@@ -256,7 +272,10 @@ fn broken_run_directories_give_clear_errors() {
     let data = tmp.path().join("data");
     std::fs::create_dir_all(&data).unwrap();
     let e = open_run(&run, Some(&data)).err().unwrap().to_string();
-    assert!(e.contains("point_cloud.ply") && e.contains("missing"), "{e}");
+    assert!(
+        e.contains("point_cloud.ply") && e.contains("missing"),
+        "{e}"
+    );
 
     std::fs::write(run.join("point_cloud.ply"), b"ply\nformat binary").unwrap();
     std::fs::write(run.join("deform.bin"), [0u8; 8]).unwrap();

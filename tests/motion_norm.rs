@@ -242,6 +242,7 @@ fn gpu_matches_twin() {
                 let cfg = NormConfig {
                     mode,
                     eps: DEFAULT_EPS,
+                    detach_stats: false,
                 };
                 let out = run_gpu(&gpu, &norm, w, h, channels, &v, &g, cfg);
                 let ctx = format!("{w}x{h} C={channels} {}", mode.name());
@@ -333,6 +334,7 @@ fn degenerate_maps_flag_and_zero() {
         let cfg = NormConfig {
             mode,
             eps: DEFAULT_EPS,
+            detach_stats: false,
         };
         let out = run_gpu(&gpu, &norm, w, h, 2, v, &g, cfg);
         let ctx = format!("{name} {}", mode.name());
@@ -392,6 +394,7 @@ fn huge_dynamic_range_is_finite() {
             let cfg = NormConfig {
                 mode,
                 eps: DEFAULT_EPS,
+                detach_stats: false,
             };
             let out = run_gpu(&gpu, &norm, w, h, 3, v, &g, cfg);
             let ctx = format!("{name} {}", mode.name());
@@ -414,4 +417,84 @@ fn config_and_shapes_are_checked() {
     let norm = MotionNorm::new(&gpu).unwrap();
     assert!(norm.buffers(&gpu, 4, 4, 4).is_err(), "4 channels");
     assert!(norm.buffers(&gpu, 0, 4, 2).is_err(), "empty image");
+}
+
+#[test]
+fn detached_statistics_twin_matches_finite_differences_with_frozen_stats() {
+    // With `detach_stats` the statistics are constants of the backward pass: the gradient is
+    // that of m̂ = (|v| − o)/d with o, d frozen at the forward's values.
+    use dispflow_vk::reference::motion::{magnitude_backward, norm_backward_detached};
+    let (n, channels) = (6 * 5, 3usize);
+    let v = field(41, n * channels);
+    let g = field(42, n);
+    for mode in NormMode::ALL {
+        let fwd = normalize_f64(&v, channels, mode, 1e-6);
+        let (o, d) = (fwd.stats.offset, fwd.stats.denom);
+        let loss = |v: &[f64]| -> f64 {
+            let m = dispflow_vk::reference::motion::magnitudes_f64(v, channels);
+            m.iter().zip(&g).map(|(m, g)| (m - o) / d * g).sum()
+        };
+        let grad = magnitude_backward(&v, channels, &norm_backward_detached(&fwd, &g));
+        let scale = max_abs(&grad).max(1.0);
+        let h = 1e-6;
+        for i in 0..v.len() {
+            let (mut vp, mut vm) = (v.clone(), v.clone());
+            vp[i] += h;
+            vm[i] -= h;
+            let fd = (loss(&vp) - loss(&vm)) / (2.0 * h);
+            assert!(
+                (fd - grad[i]).abs() <= 1e-6 * scale,
+                "{} component {i}: analytic {}, fd {fd}",
+                mode.name(),
+                grad[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn detached_statistics_gpu_matches_twin() {
+    use dispflow_vk::reference::motion::{magnitude_backward, norm_backward_detached};
+    let gpu = testing::gpu();
+    let norm = MotionNorm::new(&gpu).unwrap();
+    let (w, h) = (37u32, 29u32);
+    for channels in [2u32, 3] {
+        for mode in NormMode::ALL {
+            let n = (w * h) as usize;
+            let v: Vec<f32> = field(70 + channels as u64, n * channels as usize)
+                .iter()
+                .map(|&x| x as f32)
+                .collect();
+            let g: Vec<f32> = field(80, n).iter().map(|&x| x as f32).collect();
+            let cfg = NormConfig {
+                mode,
+                eps: DEFAULT_EPS,
+                detach_stats: true,
+            };
+            let out = run_gpu(&gpu, &norm, w, h, channels, &v, &g, cfg);
+            let m64: Vec<f64> = out.m.iter().map(|&x| x as f64).collect();
+            let tw = normalize_magnitudes(&m64, mode, 1e-6);
+            let v64: Vec<f64> = v.iter().map(|&x| x as f64).collect();
+            let g64: Vec<f64> = g.iter().map(|&x| x as f64).collect();
+            let tdv =
+                magnitude_backward(&v64, channels as usize, &norm_backward_detached(&tw, &g64));
+            let scale = max_abs(&tdv);
+            assert!(scale > 0.0);
+            for (i, (a, b)) in out.dv.iter().zip(&tdv).enumerate() {
+                assert!(
+                    (*a as f64 - b).abs() <= 1e-5 * scale,
+                    "C={channels} {}: dv[{i}] gpu {a}, twin {b}",
+                    mode.name()
+                );
+            }
+            // Unlike the full backward, no pixel gets the image-wide sum: the argmax pixel's
+            // gradient is its own g/d.
+            if mode == NormMode::MinMax {
+                let p = out.stats.argmax as usize;
+                let c = channels as usize;
+                let here = (0..c).map(|k| tdv[p * c + k].powi(2)).sum::<f64>().sqrt();
+                assert!(here <= (g64[p] / tw.stats.denom).abs() * (1.0 + 1e-9) + 1e-12);
+            }
+        }
+    }
 }

@@ -264,6 +264,7 @@ struct MotionNormParams {
     float q25_frac;   // q·(n − 1) − floor(q·(n − 1))
     float q50_frac;
     float q75_frac;
+    uint detach;      // backward: 1 = statistics held constant (no gradient through min/max…)
 };
 
 // src/kernels/metrics.rs — per-pixel passes of MMAP (keys, AP terms) and DRC.

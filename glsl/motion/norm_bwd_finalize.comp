@@ -43,7 +43,7 @@ void main() {
     float dl_dd = -s_sum[0].y * inv_d;
     float c0 = 0.0, c1 = 0.0;
     for (uint k = 0u; k < 6u; ++k) special(k, NONE, 0.0);
-    if (ok) {
+    if (ok && pc.detach == 0u) {
         if (pc.mode == MODE_MINMAX) {
             special(0u, stats[NS_ARGMIN], dl_do - dl_dd);
             special(1u, stats[NS_ARGMAX], dl_dd);

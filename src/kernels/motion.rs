@@ -158,6 +158,10 @@ impl NormFlag {
 pub struct NormConfig {
     pub mode: NormMode,
     pub eps: f32,
+    /// Backward holds the statistics (min/max, mean/std, quantiles) constant: ∂m̂/∂m = 1/d
+    /// per pixel. With them (autograd semantics) min-max puts the whole image's gradient sum
+    /// on the argmax pixel, which a training loop can exploit by inflating one pixel.
+    pub detach_stats: bool,
 }
 
 impl Default for NormConfig {
@@ -165,6 +169,7 @@ impl Default for NormConfig {
         NormConfig {
             mode: NormMode::MinMax,
             eps: DEFAULT_EPS,
+            detach_stats: false,
         }
     }
 }
@@ -177,7 +182,11 @@ impl NormConfig {
                 "normalisation eps {eps}: expected a finite number >= 0"
             )));
         }
-        Ok(NormConfig { mode, eps })
+        Ok(NormConfig {
+            mode,
+            eps,
+            detach_stats: false,
+        })
     }
 }
 
@@ -205,6 +214,7 @@ pub struct MotionNormParams {
     pub q25_frac: f32,
     pub q50_frac: f32,
     pub q75_frac: f32,
+    pub detach: u32,
 }
 
 /// The statistics buffer decoded on the host (for tests, logs and reports), in magnitude units.
@@ -415,6 +425,7 @@ impl MotionNorm {
             q25_frac,
             q50_frac,
             q75_frac,
+            detach: cfg.detach_stats as u32,
         }
     }
 

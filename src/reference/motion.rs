@@ -223,6 +223,16 @@ pub fn norm_backward(n: &Normalized, mode: NormMode, d_m_hat: &[f64]) -> Vec<f64
     dm
 }
 
+/// ∂L/∂m with the statistics held constant (`detach_stats`): `∂L/∂m̂ / d` per pixel, zero
+/// when degenerate.
+pub fn norm_backward_detached(n: &Normalized, d_m_hat: &[f64]) -> Vec<f64> {
+    assert_eq!(d_m_hat.len(), n.m.len());
+    if n.stats.flag != NormFlag::Ok {
+        return vec![0.0; d_m_hat.len()];
+    }
+    d_m_hat.iter().map(|g| g / n.stats.denom).collect()
+}
+
 /// ∂L/∂v ([H·W, C] interleaved) from ∂L/∂m through `m = |v|` (0 where |v| = 0).
 pub fn magnitude_backward(v: &[f64], channels: usize, d_m: &[f64]) -> Vec<f64> {
     let mut out = vec![0.0; v.len()];

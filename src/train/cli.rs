@@ -76,6 +76,10 @@ pub struct TrainArgs {
     /// intermediate (v2, t1), the ablation [default: direct].
     #[arg(long, value_enum)]
     pub motion_order: Option<super::config::MotionOrder>,
+    /// Gradient through the normalisation statistics: detached (min/max held constant) or full
+    /// (autograd through them) [default: detached].
+    #[arg(long, value_enum)]
+    pub motion_norm_grad: Option<super::config::NormGrad>,
     /// Print a per-kernel GPU time breakdown at every log line.
     #[arg(short, long)]
     pub verbose: bool,
@@ -228,6 +232,7 @@ pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
     c.pair_gap = a.pair_gap.unwrap_or(c.pair_gap);
     c.flow_preset = a.flow_preset.clone().unwrap_or(c.flow_preset);
     c.motion_order = a.motion_order.unwrap_or(c.motion_order);
+    c.motion_norm_grad = a.motion_norm_grad.unwrap_or(c.motion_norm_grad);
     c.validate()?;
     Ok(c)
 }

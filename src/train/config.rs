@@ -124,12 +124,25 @@ pub struct TrainConfig {
     /// (intermediate (v2, t1), the ablation).
     #[serde(default)]
     pub motion_order: MotionOrder,
+    /// Gradient through the normalisation statistics: detached (constants; the default) or
+    /// full (autograd through min/max, which lets one pixel take the whole image's gradient).
+    #[serde(default)]
+    pub motion_norm_grad: NormGrad,
+}
+
+/// How the motion loss differentiates the magnitude normalisation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NormGrad {
+    /// Statistics (min, max, …) are constants of the backward pass.
+    #[default]
+    Detached,
+    /// Autograd semantics: gradients also flow through the statistics.
+    Full,
 }
 
 /// Which intermediate image separates scene motion from camera motion (DESIGN §2).
-#[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum MotionOrder {
     /// (v1,t1) → (v1,t2) → (v2,t2): scene motion under the photometrically supervised view.
@@ -189,6 +202,7 @@ impl TrainConfig {
             pair_gap: 1,
             flow_preset: "default".into(),
             motion_order: MotionOrder::Direct,
+            motion_norm_grad: NormGrad::Detached,
         }
     }
 

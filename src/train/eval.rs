@@ -70,12 +70,13 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
                 "field `iterations`: expected a non-negative integer",
             )
         })?;
-    let data_dir = match data {
-        Some(d) => d.to_path_buf(),
-        None => PathBuf::from(m["dataset"].as_str().ok_or_else(|| {
-            invalid(&metrics_path, "field `dataset`: expected the dataset path")
-        })?),
-    };
+    let data_dir =
+        match data {
+            Some(d) => d.to_path_buf(),
+            None => PathBuf::from(m["dataset"].as_str().ok_or_else(|| {
+                invalid(&metrics_path, "field `dataset`: expected the dataset path")
+            })?),
+        };
     if !data_dir.is_dir() {
         return Err(invalid(
             &data_dir,
@@ -153,6 +154,10 @@ pub struct EvalReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mmap: Option<f64>,
     pub drc: Option<f64>,
+    /// MMAP of the optical flow frozen render → ground truth: an upper reference for how
+    /// well the motion loss's signal separates moving pixels.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flow_mmap: Option<f64>,
     pub device: String,
     pub per_frame: Vec<FrameReport>,
 }
@@ -163,6 +168,9 @@ pub struct FrameReport {
     pub metrics: FrameMetrics,
     pub l1: f64,
     pub has_mask: bool,
+    /// AP of the optical flow frozen render → ground truth (the motion loss's signal).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flow_ap: Option<f64>,
 }
 
 /// "DispFlow-GS (α=0.1)" or "Deformable-3DGS" from the run's configuration.
@@ -179,7 +187,13 @@ pub fn method_name(cfg: &TrainConfig) -> String {
 }
 
 const TABLE_HEADERS: [&str; 7] = [
-    "Method", "Scene", "PSNR ↑", "SSIM ↑", "LPIPS ↓", "MMAP ↑", "DRC ↑",
+    "Method",
+    "Scene",
+    "PSNR ↑",
+    "SSIM ↑",
+    "LPIPS ↓",
+    "MMAP ↑",
+    "DRC ↑",
 ];
 
 fn table_row(r: &EvalReport) -> Vec<String> {
@@ -284,6 +298,9 @@ fn eval_one(gpu: &Gpu, run: &Run, pictures: bool) -> Result<EvalReport> {
         lpips_note: "unavailable: no --lpips-weights given".into(),
         mmap,
         drc,
+        flow_mmap: mmap.and(crate::kernels::metrics::mmap(
+            per.iter().map(|e| e.scene_ap),
+        )),
         device: gpu.info.to_string(),
         per_frame: per
             .iter()
@@ -291,6 +308,7 @@ fn eval_one(gpu: &Gpu, run: &Run, pictures: bool) -> Result<EvalReport> {
                 metrics: FrameMetrics::of(e),
                 l1: e.values.l1,
                 has_mask: e.has_mask,
+                flow_ap: e.scene_ap,
             })
             .collect(),
     };
@@ -311,18 +329,20 @@ fn eval_one(gpu: &Gpu, run: &Run, pictures: bool) -> Result<EvalReport> {
         }
     }
     eprintln!(
-        "{}: PSNR {:.2} SSIM {:.4} MMAP {} DRC {} → {}",
+        "{}: PSNR {:.2} SSIM {:.4} MMAP {} DRC {} (optical-flow MMAP {}) → {}",
         run.dir.display(),
         r.psnr,
         r.ssim,
         report::fmt_metric(r.mmap, 4),
         report::fmt_metric(r.drc, 4),
+        report::fmt_metric(r.flow_mmap, 4),
         out.display()
     );
     Ok(r)
 }
 
-/// render | ground truth | error | displacement flow | motion mask (when present).
+/// render | ground truth | error | displacement flow | optical flow (frozen render → ground
+/// truth) | motion mask (when present).
 pub fn frame_strip(im: &super::FrameImages) -> Result<image::RgbImage> {
     let (w, h) = (im.width, im.height);
     let mut panels = vec![("render", report::rgb_image(&im.render, w, h)?)];
@@ -331,6 +351,12 @@ pub fn frame_strip(im: &super::FrameImages) -> Result<image::RgbImage> {
         panels.push(("|error|", report::error_map(&im.render, &im.gt, w, h)?));
     }
     panels.push(("disp. flow", report::heatmap(&im.motion, w, h)?));
+    if !im.gt.is_empty() {
+        // Black without an earlier time, so every strip of a run has the same panels.
+        let zeros = vec![0.0; (w * h) as usize];
+        let sm = im.scene_motion.as_ref().unwrap_or(&zeros);
+        panels.push(("optical flow", report::heatmap(sm, w, h)?));
+    }
     if let Some(m) = &im.mask {
         panels.push(("motion mask", report::mask_image(m, w, h)?));
     }
@@ -476,7 +502,11 @@ pub fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> (Mat3, Vec3) {
 
 fn with_pose(base: &Camera, r: Mat3, t: Vec3) -> Camera {
     Camera {
-        rot: [r.row(0).to_array(), r.row(1).to_array(), r.row(2).to_array()],
+        rot: [
+            r.row(0).to_array(),
+            r.row(1).to_array(),
+            r.row(2).to_array(),
+        ],
         trans: t.to_array(),
         ..*base
     }
@@ -489,10 +519,14 @@ fn centre_of(c: &Camera) -> Vec3 {
 
 /// The views of a path over the trainer's frames (`test` uses the test split).
 pub fn camera_path(tr: &Trainer<'_>, a: &RenderArgs, target: Vec3) -> Result<Vec<PathView>> {
-    let mut test: Vec<(Camera, f32)> = if tr.val.is_empty() { &tr.frames } else { &tr.val }
-        .iter()
-        .map(|f| (f.camera, f.time))
-        .collect();
+    let mut test: Vec<(Camera, f32)> = if tr.val.is_empty() {
+        &tr.frames
+    } else {
+        &tr.val
+    }
+    .iter()
+    .map(|f| (f.camera, f.time))
+    .collect();
     test.sort_by(|a, b| a.1.total_cmp(&b.1));
     let (t0, t1) = tr
         .frames
@@ -583,7 +617,10 @@ pub fn camera_path(tr: &Trainer<'_>, a: &RenderArgs, target: Vec3) -> Result<Vec
         CameraPath::Spiral => {
             let fwd = (target - mean_c).normalize_or(Vec3::Z);
             let right = fwd.cross(up).normalize_or(Vec3::X);
-            let spread = centres.iter().map(|c| c.distance(mean_c)).fold(0.0, f32::max);
+            let spread = centres
+                .iter()
+                .map(|c| c.distance(mean_c))
+                .fold(0.0, f32::max);
             let radius = (0.5 * spread).max(0.05 * mean_c.distance(target));
             (0..n)
                 .map(|k| {
@@ -625,7 +662,8 @@ pub fn run_render(a: &RenderArgs) -> Result<Vec<PathBuf>> {
     // The orbit/spiral look at the middle of the trained Gaussians (median per axis: robust
     // to far-away floaters).
     let target = {
-        let mut axes = [0, 1, 2].map(|k| run.gaussians.means.iter().map(|m| m[k]).collect::<Vec<_>>());
+        let mut axes =
+            [0, 1, 2].map(|k| run.gaussians.means.iter().map(|m| m[k]).collect::<Vec<_>>());
         Vec3::from(axes.each_mut().map(|v| {
             v.sort_by(|a, b| a.total_cmp(b));
             v.get(v.len() / 2).copied().unwrap_or(0.0)
@@ -653,7 +691,11 @@ pub fn run_render(a: &RenderArgs) -> Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     for (k, v) in views.iter().enumerate() {
         let prev = if a.flow {
-            times.iter().copied().filter(|&t| t < v.time).reduce(f32::max)
+            times
+                .iter()
+                .copied()
+                .filter(|&t| t < v.time)
+                .reduce(f32::max)
         } else {
             None
         };

@@ -88,7 +88,10 @@ fn upload_frame(
     let mask = match f.mask.as_ref().filter(|_| with_mask) {
         Some(m) if m.len() == px => {
             let words: Vec<u32> = m.iter().map(|&v| (v != 0) as u32).collect();
-            Some((gpu.buffer_from(&format!("mask {}", f.id), &words)?, m.clone()))
+            Some((
+                gpu.buffer_from(&format!("mask {}", f.id), &words)?,
+                m.clone(),
+            ))
         }
         Some(m) if !m.is_empty() => {
             return Err(Error::Invalid(format!(
@@ -105,7 +108,11 @@ fn upload_frame(
         time: f.time,
         target: gpu.buffer_from(&format!("target {}", f.id), &rgba)?,
         mask,
-        prev_time: times.iter().copied().filter(|&t| t < f.time).reduce(f32::max),
+        prev_time: times
+            .iter()
+            .copied()
+            .filter(|&t| t < f.time)
+            .reduce(f32::max),
     })
 }
 
@@ -234,6 +241,13 @@ struct EvalState {
     metrics: MotionMetrics,
     metric_bufs: MetricBuffers,
     flags: Buffer,
+    /// Optical flow frozen render (v, t−1) → ground truth (v, t): what the motion loss would
+    /// see, scored like the displacement flow (how good the supervision signal is).
+    flow: TvL1Flow,
+    flow_scratch: FlowScratch,
+    scene_flow: Buffer,
+    scene_norm: NormBuffers,
+    scene_metric_bufs: MetricBuffers,
 }
 
 /// One evaluated validation frame.
@@ -250,6 +264,9 @@ pub struct FrameEval {
     pub ap: Option<f64>,
     /// DRC (`None` without an earlier time).
     pub drc: Option<f64>,
+    /// AP of the optical-flow magnitude (frozen render → ground truth) against the mask: the
+    /// quality of the signal the motion loss learns from (`None` like `ap`).
+    pub scene_ap: Option<f64>,
     pub images: Option<FrameImages>,
 }
 
@@ -262,6 +279,9 @@ pub struct FrameImages {
     pub gt: Vec<[f32; 4]>,
     /// Min-max normalised displacement-flow magnitude F̂ ∈ [0, 1] (zeros without `t−1`).
     pub motion: Vec<f32>,
+    /// Min-max normalised optical-flow magnitude frozen render → ground truth (evaluation
+    /// frames with `t−1` only).
+    pub scene_motion: Option<Vec<f32>>,
     pub mask: Option<Vec<u8>>,
 }
 
@@ -442,7 +462,10 @@ impl<'g> Trainer<'g> {
             }
             let flow = TvL1Flow::new(gpu, FlowConfig::preset(&cfg.flow_preset)?)?;
             let norm = MotionNorm::new(gpu)?;
-            let ncfg = NormConfig::new(cfg.motion_normalize, 1e-6)?;
+            let ncfg = NormConfig {
+                detach_stats: cfg.motion_norm_grad == config::NormGrad::Detached,
+                ..NormConfig::new(cfg.motion_normalize, 1e-6)?
+            };
             let norm_disp = norm.buffers(gpu, w, h, 3)?;
             let norm_scene = norm.buffers(gpu, w, h, 2)?;
             Some(MotionState {
@@ -679,7 +702,11 @@ impl<'g> Trainer<'g> {
             }
             let timings = rec.finish()?;
             let flags: Vec<u32> = self.step_flags.read_mapped();
-            if let Some(m) = self.motion.as_mut().filter(|_| motion_w > 0.0 && flags[2] != 0) {
+            if let Some(m) = self
+                .motion
+                .as_mut()
+                .filter(|_| motion_w > 0.0 && flags[2] != 0)
+            {
                 // A truncated intermediate render fed this step's flow (the optimiser step is
                 // guarded by the main render only); later steps get room for it.
                 let need = flags[3].saturating_add(flags[3] / 4);
@@ -924,13 +951,8 @@ impl<'g> Trainer<'g> {
         } else {
             self.raster_bufs.d_features.all()
         };
-        m.dispflow.displacement_bwd(
-            rec,
-            self.n,
-            d_delta,
-            self.d_deform.all(),
-            m.d_deform2.all(),
-        );
+        m.dispflow
+            .displacement_bwd(rec, self.n, d_delta, self.d_deform.all(), m.d_deform2.all());
         rec.set_zone("mlp bwd");
         self.mlp.backward(
             rec,
@@ -1154,6 +1176,7 @@ impl Trainer<'_> {
             let (w, h) = (size.width, size.height);
             let norm = MotionNorm::new(gpu)?;
             let metrics = MotionMetrics::new(gpu)?;
+            let flow = TvL1Flow::new(gpu, FlowConfig::preset(&self.cfg.flow_preset)?)?;
             self.eval = Some(EvalState {
                 bufs: self.raster.buffers(gpu, &size)?,
                 deform_prev: gpu.buffer("eval deformation t-1", cap * 40)?,
@@ -1165,9 +1188,14 @@ impl Trainer<'_> {
                 ],
                 full: gpu.buffer("eval full render", (w * h) as u64 * 16)?,
                 dispflow: DispFlow::new(gpu)?,
+                metric_bufs: metrics.buffers(gpu, w, h)?,
+                flow_scratch: flow.scratch(gpu, w, h)?,
+                flow,
+                scene_flow: gpu.buffer("eval scene flow", (w * h) as u64 * 8)?,
+                scene_norm: norm.buffers(gpu, w, h, 2)?,
+                scene_metric_bufs: metrics.buffers(gpu, w, h)?,
                 norm_bufs: norm.buffers(gpu, w, h, 3)?,
                 norm,
-                metric_bufs: metrics.buffers(gpu, w, h)?,
                 metrics,
                 flags: gpu.host_buffer("eval overflow flags", 16)?,
             });
@@ -1212,7 +1240,8 @@ impl Trainer<'_> {
                 let mut fwd = |time: f32, dst: &Buffer| {
                     let (b, p) = (&self.mlp_bufs, self.mlp_params.all());
                     let tm = MlpTime::Batch(time);
-                    self.mlp.forward(&mut rec, b, self.n, means, tm, p, dst.all());
+                    self.mlp
+                        .forward(&mut rec, b, self.n, means, tm, p, dst.all());
                 };
                 fwd(t, &self.deform_out);
                 if let Some(tp) = prev {
@@ -1222,7 +1251,8 @@ impl Trainer<'_> {
             let dummy = self.d_drawn_dummy.all();
             let d = active.then(|| self.deform_out.all());
             let drawn = drawn_of(&self.drawn);
-            self.deform.forward(&mut rec, self.n, &canon, d, dummy, &drawn);
+            self.deform
+                .forward(&mut rec, self.n, &canon, d, dummy, &drawn);
             let mut g = splat_inputs(&self.layout, &self.params, &self.drawn, self.n, deg);
             if prev.is_some() {
                 if active {
@@ -1265,8 +1295,7 @@ impl Trainer<'_> {
             }
             if let (Some(f), Some(_)) = (frame, prev) {
                 // The frozen render: the same view with the deformation of t−1.
-                let g_prev =
-                    splat_inputs(&self.layout, &self.params, &e.drawn_prev, self.n, deg);
+                let g_prev = splat_inputs(&self.layout, &self.params, &e.drawn_prev, self.n, deg);
                 self.raster.forward(&mut rec, &e.bufs, &cam, &g_prev, &opts);
                 rec.copy(e.bufs.overflow_flag(), e.flags.slice(8, 8));
                 e.metrics.record_drc(
@@ -1277,6 +1306,16 @@ impl Trainer<'_> {
                     e.full.all(),
                     f.target.all(),
                 );
+                let (frozen, sf) = (e.bufs.out_rgba.all(), e.scene_flow.all());
+                e.flow
+                    .record(&mut rec, &e.flow_scratch, frozen, f.target.all(), sf);
+                e.norm
+                    .record(&mut rec, &mut e.scene_norm, sf, NormConfig::default());
+                if let Some((mask, _)) = &f.mask {
+                    let m_hat = e.scene_norm.m_hat();
+                    e.metrics
+                        .record_ap(&mut rec, &e.scene_metric_bufs, m_hat, mask.all());
+                }
             }
             rec.finish()?;
             let flags: Vec<u32> = e.flags.read_mapped();
@@ -1303,9 +1342,15 @@ impl Trainer<'_> {
                 (Some(_), Some(_)) => e.metric_bufs.ap(self.gpu)?,
                 _ => None,
             };
-            let drc = match frame.zip(prev) {
-                Some(_) => Some(e.metric_bufs.drc(self.gpu)?),
-                None => None,
+            let (drc, scene_ap) = match frame.zip(prev) {
+                Some(_) => (
+                    Some(e.metric_bufs.drc(self.gpu)?),
+                    match mask {
+                        Some(_) => e.scene_metric_bufs.ap(self.gpu)?,
+                        None => None,
+                    },
+                ),
+                None => (None, None),
             };
             let images = if want_images {
                 let render: Vec<[f32; 4]> = self.gpu.read(e.full.elems::<[f32; 4]>(0, px))?;
@@ -1317,12 +1362,20 @@ impl Trainer<'_> {
                     Some(_) => self.gpu.read(e.norm_bufs.m_hat())?,
                     None => vec![0.0; px as usize],
                 };
+                let scene_motion = match frame.zip(prev) {
+                    Some(_) => {
+                        let v: Vec<f32> = self.gpu.read(e.scene_norm.m_hat())?;
+                        Some(v[..px as usize].to_vec())
+                    }
+                    None => None,
+                };
                 Some(FrameImages {
                     width: cam.width,
                     height: cam.height,
                     render,
                     gt,
                     motion: motion[..px as usize].to_vec(),
+                    scene_motion,
                     mask: mask.map(|m| m.1.clone()),
                 })
             } else {
@@ -1335,6 +1388,7 @@ impl Trainer<'_> {
                 has_mask: mask.is_some_and(|m| m.1.iter().any(|&v| v != 0)),
                 ap,
                 drc,
+                scene_ap,
                 images,
             });
         }
