@@ -291,3 +291,21 @@ fn broken_run_directories_give_clear_errors() {
     let e = run_eval(&a).unwrap_err().to_string();
     assert!(e.contains("alex.pth") && e.contains("LPIPS"), "{e}");
 }
+
+#[test]
+fn look_at_gives_an_upright_opencv_pose() {
+    use dispflow_vk::train::eval::look_at;
+    use glam::Vec3;
+    let (eye, target, up) = (Vec3::new(3.0, 1.0, -2.0), Vec3::new(0.5, 0.2, 0.3), Vec3::Z);
+    let (r, t) = look_at(eye, target, up);
+    let to_cam = |p: Vec3| r * p + t;
+    // Orthonormal and right-handed.
+    assert!((r.determinant() - 1.0).abs() < 1e-5);
+    assert!((r * r.transpose() - glam::Mat3::IDENTITY).abs_diff_eq(glam::Mat3::ZERO, 1e-5));
+    // The eye is the origin, the target straight ahead on +z.
+    assert!(to_cam(eye).length() < 1e-5);
+    let c = to_cam(target);
+    assert!(c.z > 0.0 && c.x.abs() < 1e-5 && c.y.abs() < 1e-5);
+    // A point above the target is above the image centre (OpenCV: smaller y).
+    assert!(to_cam(target + up).y < 0.0);
+}

@@ -5,7 +5,7 @@ use dispflow_vk::model::gaussians::HostGaussians;
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::{read_ply, write_ply, Checkpoint};
 use dispflow_vk::train::cli::{resolve_config, TrainArgs};
-use dispflow_vk::train::config::TrainConfig;
+use dispflow_vk::train::config::{MotionOrder, TrainConfig};
 use dispflow_vk::train::Trainer;
 use train_common::{tiny_config, tiny_scene};
 
@@ -210,9 +210,10 @@ fn motion_step_runs_and_changes_the_deformation() {
     cfg.warm_up = 10;
     cfg.densify.until = 0;
     cfg.flow_preset = "fast".into();
-    let run = |w: f32| {
+    let run = |w: f32, order: MotionOrder| {
         let mut c = cfg.clone();
         c.motion_weight = w;
+        c.motion_order = order;
         c.motion_start = 20;
         let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
         assert_eq!(tr.motion_weight_at(19), 0.0);
@@ -231,12 +232,14 @@ fn motion_step_runs_and_changes_the_deformation() {
         assert!(p.iter().all(|v| v.is_finite()));
         p
     };
-    let base = run(0.0);
-    let motion = run(1.0);
-    let diff = base.iter().zip(&motion).filter(|(a, b)| a != b).count();
-    assert!(
-        diff > base.len() / 10,
-        "the motion term changed only {diff} of {} MLP parameters",
-        base.len()
-    );
+    let base = run(0.0, MotionOrder::Direct);
+    for order in [MotionOrder::Direct, MotionOrder::Reverse] {
+        let motion = run(1.0, order);
+        let diff = base.iter().zip(&motion).filter(|(a, b)| a != b).count();
+        assert!(
+            diff > base.len() / 10,
+            "{order:?}: the motion term changed only {diff} of {} MLP parameters",
+            base.len()
+        );
+    }
 }

@@ -80,6 +80,10 @@ pub struct TrainArgs {
     /// (autograd through them) [default: detached].
     #[arg(long, value_enum)]
     pub motion_norm_grad: Option<super::config::NormGrad>,
+    /// Scene-motion source: tvl1 (the GPU optical flow, the method) or oracle (the synthetic
+    /// scene's ground-truth flow; an ablation isolating the estimator) [default: tvl1].
+    #[arg(long, value_enum)]
+    pub motion_flow: Option<super::config::MotionFlow>,
     /// Print a per-kernel GPU time breakdown at every log line.
     #[arg(short, long)]
     pub verbose: bool,
@@ -233,6 +237,7 @@ pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
     c.flow_preset = a.flow_preset.clone().unwrap_or(c.flow_preset);
     c.motion_order = a.motion_order.unwrap_or(c.motion_order);
     c.motion_norm_grad = a.motion_norm_grad.unwrap_or(c.motion_norm_grad);
+    c.motion_flow = a.motion_flow.unwrap_or(c.motion_flow);
     c.validate()?;
     Ok(c)
 }

@@ -128,6 +128,22 @@ pub struct TrainConfig {
     /// full (autograd through min/max, which lets one pixel take the whole image's gradient).
     #[serde(default)]
     pub motion_norm_grad: NormGrad,
+    /// Source of the scene motion: the TV-L1 estimator (the method) or, for synthetic scenes,
+    /// their ground-truth scene flow (an oracle ablation that isolates the supervision from
+    /// the estimator's quality).
+    #[serde(default)]
+    pub motion_flow: MotionFlow,
+}
+
+/// Where the motion step's scene motion comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MotionFlow {
+    /// flow(frame, intermediate render) from the GPU TV-L1 estimator.
+    #[default]
+    Tvl1,
+    /// The dataset's ground-truth 2D scene flow of the frame (synthetic scenes; direct order).
+    Oracle,
 }
 
 /// How the motion loss differentiates the magnitude normalisation.
@@ -203,6 +219,7 @@ impl TrainConfig {
             flow_preset: "default".into(),
             motion_order: MotionOrder::Direct,
             motion_norm_grad: NormGrad::Detached,
+            motion_flow: MotionFlow::Tvl1,
         }
     }
 

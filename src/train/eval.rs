@@ -490,7 +490,8 @@ pub struct PathView {
 /// `target` with `up` as the world's up.
 pub fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> (Mat3, Vec3) {
     let z = (target - eye).normalize_or(Vec3::Z);
-    let mut x = z.cross(-up);
+    // y = z × x must point down (−up): x = z × up.
+    let mut x = z.cross(up);
     if x.length_squared() < 1e-12 {
         x = z.any_orthonormal_vector();
     }

@@ -39,6 +39,8 @@ pub struct GpuFrame {
     pub mask: Option<(Buffer, Vec<u8>)>,
     /// The latest earlier time of any frame in the dataset (the MMAP/DRC predecessor `t−1`).
     pub prev_time: Option<f32>,
+    /// Ground-truth scene flow [H·W] vec2 (training frames, oracle motion flow only).
+    pub gt_flow: Option<Buffer>,
 }
 
 /// Converts a loaded camera (OpenCV, glam) to the rasteriser's.
@@ -108,6 +110,7 @@ fn upload_frame(
         time: f.time,
         target: gpu.buffer_from(&format!("target {}", f.id), &rgba)?,
         mask,
+        gt_flow: None,
         prev_time: times
             .iter()
             .copied()
@@ -391,6 +394,25 @@ impl<'g> Trainer<'g> {
             .iter()
             .map(|f| upload_frame(gpu, f, near, &times, true))
             .collect::<Result<Vec<_>>>()?;
+        let mut frames = frames;
+        if cfg.motion_weight > 0.0 && cfg.motion_flow == config::MotionFlow::Oracle {
+            if cfg.motion_order == MotionOrder::Reverse {
+                return Err(Error::Invalid(
+                    "config field motion_flow: oracle gives the flow under the frame's own view                      (direct order); use motion_order = direct"
+                        .into(),
+                ));
+            }
+            for (g, f) in frames.iter_mut().zip(&data.train) {
+                let px = (f.camera.width * f.camera.height) as usize;
+                let flow = f.flow.as_ref().filter(|v| v.len() == 2 * px).ok_or_else(|| {
+                    Error::Invalid(format!(
+                        "config field motion_flow: oracle needs ground-truth scene flow ({} has none; synthetic scenes from `dispflow-vk data gen` do)",
+                        f.image_path.display()
+                    ))
+                })?;
+                g.gt_flow = Some(gpu.buffer_from(&format!("gt flow {}", f.id), flow)?);
+            }
+        }
 
         let points: Vec<[f32; 3]> = data.points.positions.iter().map(|p| p.to_array()).collect();
         let mut host =
@@ -883,8 +905,12 @@ impl<'g> Trainer<'g> {
         } else {
             (target, m.inter.out_rgba.all())
         };
-        m.flow
-            .record(rec, &m.flow_scratch, from, to, m.scene_flow.all());
+        match &self.frames[fi].gt_flow {
+            Some(gt) => rec.copy(gt.all(), m.scene_flow.slice(0, gt.all().size)),
+            None => m
+                .flow
+                .record(rec, &m.flow_scratch, from, to, m.scene_flow.all()),
+        }
         rec.set_zone("motion");
         let disp_render = if reverse { &m.inter } else { &self.raster_bufs };
         m.norm.record(
@@ -1201,6 +1227,19 @@ impl Trainer<'_> {
             });
         }
         Ok(self.eval.as_mut().expect("just allocated"))
+    }
+
+    /// The last motion step's normalised magnitude maps `(m̂_disp, m̂_scene)` ([H·W] each) and
+    /// the training frame it used; `None` before any motion step. For diagnostics (reads the
+    /// GPU; call between steps).
+    pub fn last_motion_maps(&self) -> Result<Option<(Vec<f32>, Vec<f32>)>> {
+        let Some(m) = &self.motion else {
+            return Ok(None);
+        };
+        Ok(Some((
+            self.gpu.read(m.norm_disp.m_hat())?,
+            self.gpu.read(m.norm_scene.m_hat())?,
+        )))
     }
 
     /// Evaluates validation frame `i` (see [`Trainer::evaluate`]).
