@@ -453,7 +453,7 @@ pub struct RenderArgs {
     /// Dataset directory [default: the one recorded in the run's metrics.json].
     #[arg(long)]
     pub data: Option<PathBuf>,
-    /// Camera path [default: test].
+    /// Camera path.
     #[arg(long, value_enum, default_value_t = CameraPath::Test)]
     pub path: CameraPath,
     /// Freeze time at this value in [0, 1]: only the camera moves (camera motion alone).
@@ -463,7 +463,7 @@ pub struct RenderArgs {
     /// motion alone).
     #[arg(long)]
     pub camera: Option<usize>,
-    /// Frames of the fixed/orbit/spiral paths [default: 60].
+    /// Frames of the fixed/orbit/spiral paths.
     #[arg(long, default_value_t = 60)]
     pub frames: u32,
     /// Put the displacement-flow heatmap (motion since the previous dataset time) beside
