@@ -226,7 +226,8 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             q75_lo,
             q25_frac,
             q50_frac,
-            q75_frac
+            q75_frac,
+            detach
         ),
         layout!(metrics::MetricsParams, n, groups_x, groups, pad),
     ]
