@@ -176,11 +176,18 @@ pub struct FrameReport {
 /// "DispFlow-GS (α=0.1)" or "Deformable-3DGS" from the run's configuration.
 pub fn method_name(cfg: &TrainConfig) -> String {
     if cfg.motion_weight > 0.0 {
-        let order = match cfg.motion_order {
-            super::config::MotionOrder::Direct => "",
-            super::config::MotionOrder::Reverse => ", reverse order",
-        };
-        format!("DispFlow-GS (α={}{order})", cfg.motion_weight)
+        use super::config::{MotionFlow, MotionOrder, NormGrad};
+        let mut extra = String::new();
+        if cfg.motion_order == MotionOrder::Reverse {
+            extra += ", reverse order";
+        }
+        if cfg.motion_norm_grad == NormGrad::Full {
+            extra += ", full norm grad";
+        }
+        if cfg.motion_flow == MotionFlow::Oracle {
+            extra += ", oracle flow";
+        }
+        format!("DispFlow-GS (α={}{extra})", cfg.motion_weight)
     } else {
         "Deformable-3DGS".into()
     }
