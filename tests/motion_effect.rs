@@ -13,13 +13,13 @@
 
 mod train_common;
 
-use dispflow_vk::data::{self, LoadOptions};
+use dispflow_vk::data;
 use dispflow_vk::kernels::metrics::mmap;
 use dispflow_vk::testing;
 use dispflow_vk::train::cli::motion_means;
 use dispflow_vk::train::config::{MotionFlow, TrainConfig};
 use dispflow_vk::train::Trainer;
-use train_common::{tiny_config, tiny_scene};
+use train_common::{tiny_config, tiny_dataset};
 
 struct Outcome {
     psnr: f64,
@@ -71,12 +71,7 @@ fn list<T>(var: &str, default: &str, parse: impl Fn(&str) -> T) -> Vec<T> {
 #[test]
 fn motion_loss_raises_mmap_over_the_baseline() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tiny_scene(tmp.path());
-    let opts = LoadOptions {
-        progress: false,
-        ..LoadOptions::default()
-    };
-    let ds = data::load(&dir, &opts).unwrap();
+    let ds = tiny_dataset(tmp.path());
     let flows = list("DISPFLOW_MOTION_FLOWS", "oracle", |s| match s {
         "oracle" => MotionFlow::Oracle,
         "tvl1" => MotionFlow::Tvl1,

@@ -1,13 +1,12 @@
 //! Training end to end on lavapipe (short), configuration, checkpoints and exports, bad input.
 
-use dispflow_vk::data::{self, LoadOptions};
 use dispflow_vk::model::gaussians::HostGaussians;
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::{read_ply, write_ply, Checkpoint};
 use dispflow_vk::train::cli::{resolve_config, TrainArgs};
 use dispflow_vk::train::config::{MotionOrder, TrainConfig};
 use dispflow_vk::train::Trainer;
-use train_common::{tiny_config, tiny_scene};
+use train_common::{tiny_config, tiny_dataset, tiny_scene};
 
 mod train_common;
 
@@ -18,15 +17,7 @@ fn args() -> TrainArgs {
 #[test]
 fn short_run_raises_test_psnr() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tiny_scene(tmp.path());
-    let ds = data::load(
-        &dir,
-        &LoadOptions {
-            progress: false,
-            ..LoadOptions::default()
-        },
-    )
-    .unwrap();
+    let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
     let cfg = tiny_config(250);
     let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
@@ -196,15 +187,7 @@ fn motion_step_runs_and_changes_the_deformation() {
     // The DispFlow-GS step (second MLP pass, displacement splat, intermediate render, flow,
     // normalisation, motion L1, both MLP backward passes) against the same run without it.
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tiny_scene(tmp.path());
-    let ds = data::load(
-        &dir,
-        &LoadOptions {
-            progress: false,
-            ..LoadOptions::default()
-        },
-    )
-    .unwrap();
+    let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
     let mut cfg = tiny_config(40);
     cfg.warm_up = 10;

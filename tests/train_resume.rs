@@ -6,11 +6,10 @@
 //! run-to-run variation on lavapipe is the order of float atomic additions in blend_bwd across
 //! its worker threads, so this binary (one test) runs lavapipe with LP_NUM_THREADS=1.
 
-use dispflow_vk::data::{self, LoadOptions};
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::Checkpoint;
 use dispflow_vk::train::Trainer;
-use train_common::{tiny_config, tiny_scene};
+use train_common::{tiny_config, tiny_dataset};
 
 mod train_common;
 
@@ -19,15 +18,7 @@ fn resume_reproduces_an_uninterrupted_run() {
     // Must happen before the device exists (the first testing::gpu() call).
     std::env::set_var("LP_NUM_THREADS", "1");
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tiny_scene(tmp.path());
-    let ds = data::load(
-        &dir,
-        &LoadOptions {
-            progress: false,
-            ..LoadOptions::default()
-        },
-    )
-    .unwrap();
+    let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
     let mut cfg = tiny_config(60);
     cfg.warm_up = 25; // the MLP trains in both halves

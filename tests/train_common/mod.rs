@@ -5,12 +5,22 @@
 use std::path::PathBuf;
 
 use dispflow_vk::data::synthetic::{self, Preset as ScenePreset};
+use dispflow_vk::data::{self, Dataset, LoadOptions};
 use dispflow_vk::train::config::TrainConfig;
 
 pub fn tiny_scene(dir: &std::path::Path) -> PathBuf {
     let d = dir.join("tiny");
     synthetic::generate(ScenePreset::Tiny, 3, &d).unwrap();
     d
+}
+
+/// The tiny scene generated into `dir` and loaded (no progress output).
+pub fn tiny_dataset(dir: &std::path::Path) -> Dataset {
+    let opts = LoadOptions {
+        progress: false,
+        ..LoadOptions::default()
+    };
+    data::load(&tiny_scene(dir), &opts).unwrap()
 }
 
 /// A configuration that trains the tiny scene in seconds: small MLP, early warm-up end and
