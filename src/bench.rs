@@ -278,7 +278,7 @@ impl RasterCase {
             rec.set_zone("bwd");
             let d = OutputGrads {
                 rgba: self.d_rgba.all(),
-                depth: self.d_depth.all(),
+                depth: Some(self.d_depth.all()),
                 features: None,
             };
             self.rast

@@ -156,7 +156,7 @@ fn run(name: &str) {
         &opts,
         &OutputGrads {
             rgba: d_rgba.all(),
-            depth: d_depth.all(),
+            depth: Some(d_depth.all()),
             features: None,
         },
     );

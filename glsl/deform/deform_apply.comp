@@ -1,36 +1,5 @@
 #version 460
-// Deformable-3DGS composition: mean = x + dx, scale = exp(s) + ds, rot = normalize(q) + dr
-// (the rasteriser normalises rot again). With use_deform = 0 (warm-up) D ≡ 0.
+// Deformation composition, with the MLP output (body in deform_apply.glsl).
+#define USE_DEFORM 1
 #extension GL_GOOGLE_include_directive : require
-#include "common.glsl"
-#include "params.glsl"
-
-layout(local_size_x = 256) in;
-
-layout(push_constant) uniform Push { DeformParams pc; };
-layout(std430, binding = 0) readonly buffer Means { float means[]; };        // [N,3] canonical
-layout(std430, binding = 1) readonly buffer LogScales { float log_scales[]; }; // [N,3]
-layout(std430, binding = 2) readonly buffer Quats { vec4 quats[]; };         // [N]
-layout(std430, binding = 3) readonly buffer Deform { float d[]; };           // [N,10] dx, dr, ds
-layout(std430, binding = 4) writeonly buffer OutMeans { float out_means[]; };
-layout(std430, binding = 5) writeonly buffer OutScales { float out_scales[]; };
-layout(std430, binding = 6) writeonly buffer OutQuats { vec4 out_quats[]; };
-
-void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
-    if (i >= pc.n) return;
-    vec3 dx = vec3(0.0), ds = vec3(0.0);
-    vec4 dr = vec4(0.0);
-    if (pc.use_deform != 0u) {
-        dx = vec3(d[10 * i], d[10 * i + 1], d[10 * i + 2]);
-        dr = vec4(d[10 * i + 3], d[10 * i + 4], d[10 * i + 5], d[10 * i + 6]);
-        ds = vec3(d[10 * i + 7], d[10 * i + 8], d[10 * i + 9]);
-    }
-    for (uint a = 0; a < 3u; ++a) {
-        out_means[3 * i + a] = means[3 * i + a] + dx[a];
-        out_scales[3 * i + a] = exp(log_scales[3 * i + a]) + ds[a];
-    }
-    vec4 q = quats[i];
-    float len = length(q);
-    out_quats[i] = (len > 1e-12 ? q / len : vec4(1.0, 0.0, 0.0, 0.0)) + dr;
-}
+#include "deform_apply.glsl"

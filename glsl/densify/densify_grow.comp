@@ -21,7 +21,7 @@ layout(std430, binding = 3) writeonly buffer Action { uint action[]; };         
 layout(std430, binding = 4) writeonly buffer Growth { uint growth[]; };         // [N] 0 or 1
 
 void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.num_gaussians) return;
     float d = denom[i];
     bool dense = d > 0.0 && grad_accum[i] >= pc.grad_threshold * d;

@@ -36,7 +36,7 @@ bool pruned(float logit, float radius, float ls) {
 }
 
 void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.num_gaussians) return;
     uint code = action[i];
     if (code != ACT_KEEP && growth_off[i] >= pc.capacity - pc.num_gaussians) code = ACT_KEEP;

@@ -15,7 +15,7 @@ layout(std430, binding = 1) writeonly buffer M { float m[]; };       // [N] opac
 layout(std430, binding = 2) writeonly buffer V { float v[]; };       // [N] opacity section of Adam v
 
 void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.num_gaussians) return;
     float x = logits[i];
     logits[i] = x < pc.reset_logit ? x : pc.reset_logit;

@@ -18,7 +18,7 @@ layout(std430, binding = 3) buffer Denom { float denom[]; };              // [ca
 layout(std430, binding = 4) buffer MaxRadii { float max_radii[]; };       // [capacity]
 
 void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.num_gaussians) return;
     float radius = splats[3u * i + 1u].w;
     if (!(radius > 0.0)) return;

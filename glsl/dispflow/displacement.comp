@@ -13,7 +13,7 @@ layout(std430, binding = 1) readonly buffer D2 { float d2[]; };
 layout(std430, binding = 2) writeonly buffer Delta { float delta[]; };  // [N,3]
 
 void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.n) return;
     for (uint a = 0; a < 3u; ++a) delta[3 * i + a] = d2[10 * i + a] - d1[10 * i + a];
 }

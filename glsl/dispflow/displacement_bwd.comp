@@ -13,7 +13,7 @@ layout(std430, binding = 1) buffer DOut1 { float d_out1[]; };             // [N,
 layout(std430, binding = 2) writeonly buffer DOut2 { float d_out2[]; };   // [N,10]
 
 void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.n) return;
     for (uint a = 0; a < 3u; ++a) {
         float g = d_delta[3 * i + a];

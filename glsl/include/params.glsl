@@ -182,9 +182,9 @@ struct LossParams {
 // src/kernels/deform.rs — canonical Gaussians + deformation → what the rasteriser draws.
 struct DeformParams {
     uint n;
-    uint use_deform;  // 0 during warm-up (D ≡ 0): the MLP output is not read
-    uint pad0;
+    uint pad0;  // D ≡ 0 is a separate stage (deform_static*), not a flag
     uint pad1;
+    uint pad2;
 };
 
 // src/kernels/densify.rs — per-view densification statistics (after every backward pass).

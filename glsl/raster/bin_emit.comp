@@ -19,7 +19,7 @@ layout(std430, binding = 3) writeonly buffer Keys { uvec2 keys[]; };
 layout(std430, binding = 4) writeonly buffer Vals { uint vals[]; };
 
 void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.num_gaussians) return;
     uvec4 r = rects[i];
     uint depth_bits = floatBitsToUint(splats[SPLAT_STRIDE * i].z);

@@ -14,7 +14,7 @@ layout(std430, binding = 2) buffer Ranges { uvec2 ranges[]; };
 
 void main() {
     uint n = meta[0];
-    uint j = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint j = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (j >= n) return;
     uint tile = keys[j].y;
     if (j == 0u || keys[j - 1u].y != tile) ranges[tile].x = j;

@@ -22,7 +22,7 @@ layout(std430, binding = 7) writeonly buffer Rects { uvec4 rects[]; };         /
 layout(std430, binding = 8) writeonly buffer Counts { uint counts[]; };        // [N] tiles touched
 
 void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.num_gaussians) return;
     vec3 mean = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
     vec3 scale = vec3(scales[3 * i], scales[3 * i + 1], scales[3 * i + 2]);

@@ -51,7 +51,7 @@ void write3(uint i, vec3 dm, vec3 ds) {
 }
 
 void main() {
-    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.num_gaussians) return;
     vec3 mean = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
     vec3 scale = vec3(scales[3 * i], scales[3 * i + 1], scales[3 * i + 2]);

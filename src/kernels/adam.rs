@@ -109,13 +109,11 @@ impl Adam {
                 ..Default::default()
             };
             let mask = g.mask.map_or(b.grads, |m| m.0);
-            let blocks = g.count.div_ceil(256);
-            let gx = blocks.clamp(1, 65535);
-            rec.dispatch(
+            rec.dispatch_rows(
                 &self.pipe,
                 &pc,
                 &[b.params, b.grads, b.m, b.v, mask, skip],
-                [gx, blocks.div_ceil(gx), 1],
+                g.count,
             );
         }
         rec.set_zone("");

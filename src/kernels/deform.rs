@@ -4,7 +4,6 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::raster::grid;
 use crate::error::Result;
 use crate::shaders;
 use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
@@ -14,9 +13,9 @@ use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct DeformParams {
     pub n: u32,
-    pub use_deform: u32,
     pub pad0: u32,
     pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// Canonical parameters: `means` [N,3], `log_scales` [N,3], `quats` [N,4].
@@ -35,54 +34,59 @@ pub struct Drawn<'a> {
     pub quats: BufSlice<'a>,
 }
 
+/// Two stages per direction: with the MLP output (`deform_apply*`) and with D ≡ 0
+/// (`deform_static*`, the warm-up), which binds no MLP buffer at all.
 pub struct DeformApply {
     fwd: ComputePipeline,
+    fwd_static: ComputePipeline,
     bwd: ComputePipeline,
+    bwd_static: ComputePipeline,
 }
 
 impl DeformApply {
     pub fn new(gpu: &Gpu) -> Result<Self> {
+        use shaders::deform as d;
         Ok(DeformApply {
-            fwd: gpu.pipeline(&shaders::deform::DEFORM_APPLY)?,
-            bwd: gpu.pipeline(&shaders::deform::DEFORM_APPLY_BWD)?,
+            fwd: gpu.pipeline(&d::DEFORM_APPLY)?,
+            fwd_static: gpu.pipeline(&d::DEFORM_STATIC)?,
+            bwd: gpu.pipeline(&d::DEFORM_APPLY_BWD)?,
+            bwd_static: gpu.pipeline(&d::DEFORM_STATIC_BWD)?,
         })
     }
 
-    /// `deform`: the MLP output [N,10] (dx, dr, ds), or `None` for D ≡ 0. `dummy` is bound in
-    /// its place (any buffer).
+    /// `deform`: the MLP output [N,10] (dx, dr, ds), or `None` for D ≡ 0.
     pub fn forward(
         &self,
         rec: &mut Recorder<'_>,
         n: u32,
         c: &Canonical<'_>,
         deform: Option<BufSlice<'_>>,
-        dummy: BufSlice<'_>,
         out: &Drawn<'_>,
     ) {
         let pc = DeformParams {
             n,
-            use_deform: deform.is_some() as u32,
             ..Default::default()
         };
-        rec.dispatch(
-            &self.fwd,
-            &pc,
-            &[
-                c.means,
-                c.log_scales,
-                c.quats,
-                deform.unwrap_or(dummy),
-                out.means,
-                out.scales,
-                out.quats,
-            ],
-            grid(n),
-        );
+        let mut binds = vec![
+            c.means,
+            c.log_scales,
+            c.quats,
+            out.means,
+            out.scales,
+            out.quats,
+        ];
+        let pipe = match deform {
+            Some(d) => {
+                binds.push(d);
+                &self.fwd
+            }
+            None => &self.fwd_static,
+        };
+        rec.dispatch_rows(pipe, &pc, &binds, n);
     }
 
     /// Gradients wrt the canonical parameters (`grads`) and, when `d_deform` is given, wrt the
     /// MLP output [N,10], from the gradients wrt what was drawn (`d_drawn`).
-    #[allow(clippy::too_many_arguments)] // the stage's bindings, each one named
     pub fn backward(
         &self,
         rec: &mut Recorder<'_>,
@@ -91,28 +95,28 @@ impl DeformApply {
         d_drawn: &Drawn<'_>,
         grads: &Canonical<'_>,
         d_deform: Option<BufSlice<'_>>,
-        dummy: BufSlice<'_>,
     ) {
         let pc = DeformParams {
             n,
-            use_deform: d_deform.is_some() as u32,
             ..Default::default()
         };
-        rec.dispatch(
-            &self.bwd,
-            &pc,
-            &[
-                c.log_scales,
-                c.quats,
-                d_drawn.means,
-                d_drawn.scales,
-                d_drawn.quats,
-                grads.means,
-                grads.log_scales,
-                grads.quats,
-                d_deform.unwrap_or(dummy),
-            ],
-            grid(n),
-        );
+        let mut binds = vec![
+            c.log_scales,
+            c.quats,
+            d_drawn.means,
+            d_drawn.scales,
+            d_drawn.quats,
+            grads.means,
+            grads.log_scales,
+            grads.quats,
+        ];
+        let pipe = match d_deform {
+            Some(d) => {
+                binds.push(d);
+                &self.bwd
+            }
+            None => &self.bwd_static,
+        };
+        rec.dispatch_rows(pipe, &pc, &binds, n);
     }
 }

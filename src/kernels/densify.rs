@@ -27,7 +27,6 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::raster::grid;
 use super::raster::RasterBuffers;
 use super::scan::{Count, PrefixSum, ScanScratch};
 use crate::error::{Error, Result};
@@ -332,7 +331,7 @@ impl Densifier {
             height: raster.height,
             pad: 0,
         };
-        rec.dispatch(
+        rec.dispatch_rows(
             &self.stats,
             &p,
             &[
@@ -342,7 +341,7 @@ impl Densifier {
                 b.denom.all(),
                 b.max_radii.all(),
             ],
-            grid(n),
+            n,
         );
     }
 
@@ -399,7 +398,7 @@ impl Densifier {
         }
         let u32s = |buf| first(buf, n);
         let f = |buf| layout.slice(buf, Section::LogScales, n);
-        rec.dispatch(
+        rec.dispatch_rows(
             &self.grow,
             &p,
             &[
@@ -409,11 +408,11 @@ impl Densifier {
                 u32s(&b.action),
                 u32s(&b.growth),
             ],
-            grid(n),
+            n,
         );
         self.scan
             .record(rec, &b.scan, b.growth.all(), b.growth.all(), Count::Host(n));
-        rec.dispatch(
+        rec.dispatch_rows(
             &self.mark,
             &p,
             &[
@@ -424,7 +423,7 @@ impl Densifier {
                 u32s(&b.action),
                 u32s(&b.rows),
             ],
-            grid(n),
+            n,
         );
         self.scan
             .record(rec, &b.scan, b.rows.all(), b.offsets.all(), Count::Host(n));
@@ -449,7 +448,7 @@ impl Densifier {
                 section,
                 ..p
             };
-            rec.dispatch(
+            rec.dispatch_rows(
                 &self.write,
                 &pw,
                 &[
@@ -464,7 +463,7 @@ impl Densifier {
                     layout.slice(dst.m, sec, s.capacity),
                     layout.slice(dst.v, sec, s.capacity),
                 ],
-                grid(n),
+                n,
             );
         }
         self.record_clear_stats(rec, b);
@@ -486,7 +485,7 @@ impl Densifier {
             pad0: 0,
             pad1: 0,
         };
-        rec.dispatch(
+        rec.dispatch_rows(
             &self.reset,
             &p,
             &[
@@ -494,7 +493,7 @@ impl Densifier {
                 layout.slice(g.m, Section::Opacity, n),
                 layout.slice(g.v, Section::Opacity, n),
             ],
-            grid(n),
+            n,
         );
     }
 }

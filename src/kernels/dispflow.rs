@@ -5,7 +5,6 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::raster::grid;
 use crate::error::Result;
 use crate::shaders;
 use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
@@ -48,7 +47,7 @@ impl DispFlow {
             n,
             ..Default::default()
         };
-        rec.dispatch(&self.displacement, &pc, &[out_t1, out_t2, delta], grid(n));
+        rec.dispatch_rows(&self.displacement, &pc, &[out_t1, out_t2, delta], n);
     }
 
     /// Backward of δ: subtracts ∂L/∂δ from the dx part of `d_out_t1` and writes `d_out_t2`.
@@ -64,11 +63,11 @@ impl DispFlow {
             n,
             ..Default::default()
         };
-        rec.dispatch(
+        rec.dispatch_rows(
             &self.displacement_bwd,
             &pc,
             &[d_delta, d_out_t1, d_out_t2],
-            grid(n),
+            n,
         );
     }
 

@@ -302,14 +302,12 @@ impl Mlp {
             per_gaussian_time: per_g,
             time: t,
         };
-        let groups = n.div_ceil(64);
-        let gx = groups.clamp(1, 65535);
         rec.set_zone("mlp fwd");
-        rec.dispatch(
+        rec.dispatch_rows(
             &self.encode,
             &pc,
             &[xyz, times, b.x0.all(), b.enc_t.all()],
-            [gx, groups.div_ceil(gx), 1],
+            n,
         );
         let lin = |rec: &mut Recorder<'_>,
                    l: &LinearSpec,

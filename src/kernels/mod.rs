@@ -28,7 +28,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
     }
     vec![
         layout!(dispflow::DispFlowParams, n, weight, pad0, pad1),
-        layout!(deform::DeformParams, n, use_deform, pad0, pad1),
+        layout!(deform::DeformParams, n, pad0, pad1, pad2),
         layout!(
             densify::DensifyStatsParams,
             num_gaussians,

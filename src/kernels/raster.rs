@@ -163,12 +163,12 @@ impl SplatInputs<'_> {
     }
 }
 
-/// Upstream gradients of the forward outputs: `rgba` [H·W,4], `depth` [H·W],
-/// `features` [H·W, feature_dims].
+/// Upstream gradients of the forward outputs: `rgba` [H·W,4], `depth` [H·W] (`None`: the
+/// loss does not read depth), `features` [H·W, feature_dims].
 #[derive(Clone, Copy, Debug)]
 pub struct OutputGrads<'a> {
     pub rgba: BufSlice<'a>,
-    pub depth: BufSlice<'a>,
+    pub depth: Option<BufSlice<'a>>,
     pub features: Option<BufSlice<'a>>,
 }
 
@@ -222,6 +222,10 @@ pub struct RasterBuffers {
     pub d_sh_dc: Buffer,
     /// [N, sh_coeffs − 1, 3]
     pub d_sh_rest: Buffer,
+    /// Zeros [H·W], bound as the depth gradient when the caller has none. (A blend_bwd variant
+    /// without the depth term would let the compiler drop it and re-associate the α gradient:
+    /// kept as a zero input so every caller runs the same arithmetic.)
+    no_depth_grad: Buffer,
 }
 
 impl RasterBuffers {
@@ -257,13 +261,6 @@ fn sort_bits(cam: &Camera) -> u32 {
     let (tx, ty) = cam.tiles();
     let tiles = (tx * ty).max(2);
     32 + (32 - (tiles - 1).leading_zeros())
-}
-
-/// Workgroups for one invocation per element with 256-wide workgroups (2D past 32768).
-pub(crate) fn grid(n: u32) -> [u32; 3] {
-    let groups = n.div_ceil(256);
-    let gx = groups.clamp(1, 32768);
-    [gx, groups.div_ceil(gx).max(1), 1]
 }
 
 pub struct Rasterizer {
@@ -373,6 +370,7 @@ impl Rasterizer {
                 "raster d sh rest",
                 n * (sh_coeffs as u64 - 1).max(1) * 3 * f,
             )?,
+            no_depth_grad: gpu.buffer_from("raster zero depth grads", &vec![0f32; px as usize])?,
         })
     }
 
@@ -452,7 +450,7 @@ impl Rasterizer {
         Self::check(b, cam, g);
         let pp = Self::project_params(b, cam, g);
         let bits = sort_bits(cam);
-        rec.dispatch(
+        rec.dispatch_rows(
             &self.project,
             &pp,
             &[
@@ -466,7 +464,7 @@ impl Rasterizer {
                 b.rects.all(),
                 b.counts.all(),
             ],
-            grid(g.n),
+            g.n,
         );
         self.scan.record(
             rec,
@@ -481,7 +479,7 @@ impl Rasterizer {
             &[b.offsets.all(), b.counts.all(), b.meta.all()],
             [1, 1, 1],
         );
-        rec.dispatch(
+        rec.dispatch_rows(
             &self.bin_emit,
             &pp,
             &[
@@ -491,7 +489,7 @@ impl Rasterizer {
                 b.sort.keys[0].all(),
                 b.sort.vals[0].all(),
             ],
-            grid(g.n),
+            g.n,
         );
         let out = self
             .sort
@@ -554,7 +552,7 @@ impl Rasterizer {
             b.final_t.all(),
             b.n_contrib.all(),
             d.rgba,
-            d.depth,
+            d.depth.unwrap_or(b.no_depth_grad.all()),
             b.grad2d.all(),
         ];
         if let (Some((f, _)), Some(df)) = (g.features, d.features) {
@@ -568,7 +566,7 @@ impl Rasterizer {
             [tx.max(1), ty.max(1), 1],
         );
         let pp = Self::project_params(b, cam, g);
-        rec.dispatch(
+        rec.dispatch_rows(
             &self.project_bwd,
             &pp,
             &[
@@ -586,12 +584,31 @@ impl Rasterizer {
                 b.d_sh_dc.all(),
                 b.d_sh_rest.all(),
             ],
-            grid(g.n),
+            g.n,
         );
     }
 
+    /// The one grow-on-overflow policy: after a forward pass whose tile intersections
+    /// overflowed `b` (it needed `needed`), reallocate `b` with a quarter of headroom. The
+    /// caller re-runs the pass (nothing is ever dropped silently).
+    pub fn grow(&self, gpu: &Gpu, b: &mut RasterBuffers, needed: u32) -> Result<()> {
+        let grown = needed.checked_add(needed / 4).ok_or(Error::Capacity {
+            what: "tile intersections",
+            capacity: u32::MAX as u64,
+            asked: needed as u64,
+        })?;
+        *b = self.buffers(
+            gpu,
+            &RasterSize {
+                isect_capacity: grown,
+                ..b.size()
+            },
+        )?;
+        Ok(())
+    }
+
     /// Forward in its own submit, growing `b` and re-running when the intersection capacity
-    /// overflowed. For rendering outside the training step (tests, eval, render).
+    /// overflowed. For rendering outside the training step (tests, bench).
     pub fn render_checked(
         &self,
         gpu: &Gpu,
@@ -608,18 +625,7 @@ impl Rasterizer {
             if need <= b.isect_capacity {
                 return Ok(());
             }
-            let grown = need.checked_add(need / 4).ok_or(Error::Capacity {
-                what: "tile intersections",
-                capacity: u32::MAX as u64,
-                asked: need as u64,
-            })?;
-            *b = self.buffers(
-                gpu,
-                &RasterSize {
-                    isect_capacity: grown,
-                    ..b.size()
-                },
-            )?;
+            self.grow(gpu, b, need)?;
         }
     }
 }

@@ -370,6 +370,21 @@ impl<'g> Recorder<'g> {
         self.dispatch(p, pc, bindings, groups);
     }
 
+    /// One invocation per row for `rows` rows, in workgroups of the reflected width: a 2D grid
+    /// (x up to 65 535 groups, the rest in y); the shader's row is
+    /// `gl_GlobalInvocationID.x + gl_GlobalInvocationID.y · gl_NumWorkGroups.x · gl_WorkGroupSize.x`.
+    pub fn dispatch_rows<P: Pod>(
+        &mut self,
+        p: &ComputePipeline,
+        pc: &P,
+        bindings: &[BufSlice<'_>],
+        rows: u32,
+    ) {
+        let groups = rows.div_ceil(p.workgroup_size()[0]);
+        let gx = groups.clamp(1, self.gpu.info.max_workgroup_count[0].min(65_535));
+        self.dispatch(p, pc, bindings, [gx, groups.div_ceil(gx).max(1), 1]);
+    }
+
     /// Dispatches with the workgroup count read from `args` (three u32) on the GPU, so a count
     /// computed by an earlier dispatch never travels to the host.
     pub fn dispatch_indirect<P: Pod>(

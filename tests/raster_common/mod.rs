@@ -248,7 +248,7 @@ pub fn backward(
     let mut rec = Recorder::new(gpu).unwrap();
     let d = OutputGrads {
         rgba: dr.all(),
-        depth: dd.all(),
+        depth: Some(dd.all()),
         features: (up.feature_dims > 0).then(|| df.all()),
     };
     rast.backward(&mut rec, b, cam, &up.inputs(), opts, &d);

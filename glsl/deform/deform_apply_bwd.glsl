@@ -1,0 +1,45 @@
+// Backward of deform_apply: from the rasteriser's gradients wrt the drawn mean, scale and rot
+// to the canonical parameters (written into their gradient sections) and to the MLP outputs
+// (dx, dr, ds), which get exactly the drawn gradients. Body of deform_apply_bwd.comp
+// (USE_DEFORM 1) and deform_static_bwd.comp (USE_DEFORM 0: no MLP-output gradient binding).
+#extension GL_GOOGLE_include_directive : require
+#include "common.glsl"
+#include "params.glsl"
+
+layout(local_size_x = 256) in;
+
+layout(push_constant) uniform Push { DeformParams pc; };
+layout(std430, binding = 0) readonly buffer LogScales { float log_scales[]; };
+layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };
+layout(std430, binding = 2) readonly buffer DMeans { float d_means[]; };     // ∂L/∂ drawn mean
+layout(std430, binding = 3) readonly buffer DScales { float d_scales[]; };   // ∂L/∂ drawn scale
+layout(std430, binding = 4) readonly buffer DQuats { vec4 d_quats[]; };      // ∂L/∂ drawn rot
+layout(std430, binding = 5) writeonly buffer GMeans { float g_means[]; };    // ∂L/∂x
+layout(std430, binding = 6) writeonly buffer GLogScales { float g_log_scales[]; };
+layout(std430, binding = 7) writeonly buffer GQuats { vec4 g_quats[]; };
+#if USE_DEFORM
+layout(std430, binding = 8) writeonly buffer DDeform { float d_deform[]; };  // [N,10]
+#endif
+
+void main() {
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    if (i >= pc.n) return;
+    vec4 dq = d_quats[i];
+    for (uint a = 0; a < 3u; ++a) {
+        float dm = d_means[3 * i + a], dsc = d_scales[3 * i + a];
+        g_means[3 * i + a] = dm;
+        g_log_scales[3 * i + a] = dsc * exp(log_scales[3 * i + a]);
+#if USE_DEFORM
+        d_deform[10 * i + a] = dm;
+        d_deform[10 * i + 7 + a] = dsc;
+#endif
+    }
+#if USE_DEFORM
+    for (uint a = 0; a < 4u; ++a) d_deform[10 * i + 3 + a] = dq[a];
+#endif
+    // normalize(q): ∂/∂q = (I − q̂q̂ᵀ) / |q|; a degenerate q was replaced by a constant.
+    vec4 q = quats[i];
+    float len = length(q);
+    vec4 qn = q / max(len, 1e-30);
+    g_quats[i] = len > 1e-12 ? (dq - qn * dot(qn, dq)) / len : vec4(0.0);
+}
