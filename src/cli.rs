@@ -22,11 +22,11 @@ pub enum Command {
     Train(dispflow_vk::train::cli::TrainArgs),
     /// Evaluate trained runs on their test split: metrics JSON, Markdown table, picture strips,
     /// per-frame and training plots (into RUN/eval/).
-    Eval(dispflow_vk::train::eval::EvalArgs),
+    Eval(dispflow_vk::eval::run::EvalArgs),
     /// Render a trained run along a camera path (test cameras, a fixed camera over time, an
     /// orbit or a spiral) to PNGs, optionally with the displacement-flow heatmap and per-frame
     /// 3DGS .ply exports.
-    Render(dispflow_vk::train::eval::RenderArgs),
+    Render(dispflow_vk::eval::render::RenderArgs),
     /// List the Vulkan devices and the limits that matter to the kernels.
     Devices,
     /// Time the GPU kernels (sort, scan) with GPU timestamps and print a table.

@@ -13,10 +13,10 @@ fn main() -> anyhow::Result<()> {
             dispflow_vk::train::cli::run(&args)?;
         }
         cli::Command::Eval(args) => {
-            dispflow_vk::train::eval::run_eval(&args)?;
+            dispflow_vk::eval::run::run_eval(&args)?;
         }
         cli::Command::Render(args) => {
-            dispflow_vk::train::eval::run_render(&args)?;
+            dispflow_vk::eval::render::run_render(&args)?;
         }
         cli::Command::Devices => {
             for (i, (name, kind)) in dispflow_vk::vk::list_devices()?.iter().enumerate() {

@@ -5,13 +5,12 @@ mod train_common;
 
 use std::path::{Path, PathBuf};
 
+use dispflow_vk::eval::render::{run_render, CameraPath, RenderArgs};
+use dispflow_vk::eval::run::{load_trainer, open_run, run_eval, EvalArgs};
 use dispflow_vk::report::Table;
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::read_ply;
 use dispflow_vk::train::cli::TrainArgs;
-use dispflow_vk::train::eval::{
-    load_trainer, open_run, run_eval, run_render, CameraPath, EvalArgs, RenderArgs,
-};
 use train_common::tiny_scene;
 
 /// 60 iterations on the tiny scene: deformation from 20, motion term from 40, densification.
@@ -294,7 +293,7 @@ fn broken_run_directories_give_clear_errors() {
 
 #[test]
 fn look_at_gives_an_upright_opencv_pose() {
-    use dispflow_vk::train::eval::look_at;
+    use dispflow_vk::eval::render::look_at;
     use glam::Vec3;
     let (eye, target, up) = (Vec3::new(3.0, 1.0, -2.0), Vec3::new(0.5, 0.2, 0.3), Vec3::Z);
     let (r, t) = look_at(eye, target, up);

@@ -14,9 +14,9 @@
 mod train_common;
 
 use dispflow_vk::data;
+use dispflow_vk::eval::report::motion_means;
 use dispflow_vk::kernels::metrics::mmap;
 use dispflow_vk::testing;
-use dispflow_vk::train::cli::motion_means;
 use dispflow_vk::train::config::{MotionFlow, TrainConfig};
 use dispflow_vk::train::Trainer;
 use train_common::{tiny_config, tiny_dataset};
@@ -36,9 +36,9 @@ fn train(ds: &data::Dataset, cfg: &TrainConfig) -> Outcome {
     }
     let per = tr.evaluate(false).unwrap();
     let (mmap_v, drc) = motion_means(&per);
-    let psnr = per.iter().map(|e| e.values.psnr).sum::<f64>() / per.len() as f64;
+    let psnr = per.iter().map(|e| e.psnr).sum::<f64>() / per.len() as f64;
     for e in &per {
-        assert!(e.values.psnr.is_finite());
+        assert!(e.psnr.is_finite());
         assert!(e.drc.is_some_and(|d| (0.0..=1.0).contains(&d)));
         assert!(e.ap.is_some_and(|a| (0.0..=1.0).contains(&a)) || !e.has_mask);
     }
@@ -46,7 +46,7 @@ fn train(ds: &data::Dataset, cfg: &TrainConfig) -> Outcome {
         psnr,
         mmap: mmap_v.expect("the tiny scene has motion masks"),
         drc: drc.expect("every test frame has a predecessor"),
-        flow_mmap: mmap(per.iter().map(|e| e.scene_ap)).unwrap(),
+        flow_mmap: mmap(per.iter().map(|e| e.flow_ap)).unwrap(),
     }
 }
 

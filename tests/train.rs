@@ -21,12 +21,12 @@ fn short_run_raises_test_psnr() {
     let gpu = testing::gpu();
     let cfg = tiny_config(250);
     let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
-    let n0 = tr.n;
+    let n0 = tr.n();
     let before: f64 = tr
         .evaluate(false)
         .unwrap()
         .iter()
-        .map(|v| v.values.psnr)
+        .map(|v| v.psnr)
         .sum::<f64>()
         / ds.val.len() as f64;
     let mut last = None;
@@ -39,20 +39,21 @@ fn short_run_raises_test_psnr() {
         .evaluate(false)
         .unwrap()
         .iter()
-        .map(|v| v.values.psnr)
+        .map(|v| v.psnr)
         .sum::<f64>()
         / ds.val.len() as f64;
     let l = last.unwrap();
     eprintln!(
         "PSNR {before:.2} -> {after:.2} dB; train loss {:.4}; Gaussians {n0} -> {}",
-        l.loss.loss, tr.n
+        l.loss.loss,
+        tr.n()
     );
     assert!(l.loss.loss.is_finite());
     assert!(
         after > before + 1.5,
         "test PSNR only went from {before:.2} to {after:.2} dB"
     );
-    assert_ne!(tr.n, n0, "densification ran (the count changed)");
+    assert_ne!(tr.n(), n0, "densification ran (the count changed)");
     let g = tr.gaussians().unwrap();
     assert!(g
         .means
@@ -69,18 +70,18 @@ fn checkpoint_round_trip_and_corruption() {
         iteration: 7,
         ..Default::default()
     };
-    c.gaussians = HostGaussians::from_points(
+    c.model.gaussians = HostGaussians::from_points(
         &[[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 2.0]],
         None,
         2,
     )
     .unwrap();
-    c.gauss_m = c.gaussians.clone();
-    c.gauss_v = c.gaussians.clone();
+    c.model.gauss_m = c.model.gaussians.clone();
+    c.model.gauss_v = c.model.gaussians.clone();
     c.densify_stats = [vec![1.0; 3], vec![2.0; 3], vec![3.0; 3]];
-    c.mlp_params = vec![0.5; 10];
-    c.mlp_m = vec![0.25; 10];
-    c.mlp_v = vec![0.125; 10];
+    c.model.mlp_params = vec![0.5; 10];
+    c.model.mlp_m = vec![0.25; 10];
+    c.model.mlp_v = vec![0.125; 10];
     let p = tmp.path().join("last.ckpt");
     c.save(&p).unwrap();
     assert_eq!(Checkpoint::load(&p).unwrap(), c);
@@ -211,7 +212,7 @@ fn motion_step_runs_and_changes_the_deformation() {
             last = tr.step(true, false).unwrap();
         }
         assert!(last.unwrap().loss.loss.is_finite());
-        let p: Vec<f32> = gpu.read(tr.mlp_params.all()).unwrap();
+        let p: Vec<f32> = gpu.read(tr.model.deform.params.all()).unwrap();
         assert!(p.iter().all(|v| v.is_finite()));
         p
     };

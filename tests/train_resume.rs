@@ -48,8 +48,8 @@ fn resume_reproduces_an_uninterrupted_run() {
 
     assert_eq!(resumed.iteration, straight.iteration);
     assert_eq!(
-        resumed.gaussians.len(),
-        straight.gaussians.len(),
+        resumed.model.gaussians.len(),
+        straight.model.gaussians.len(),
         "same densification"
     );
     assert!(

@@ -1,6 +1,7 @@
 //! Model state: canonical Gaussians and the deformation network (configuration, parameter
-//! layout, initialisation, optimiser settings).
+//! layout, initialisation, optimiser settings) and their GPU state (`state`).
 
 pub mod deform;
 pub mod gaussians;
 pub mod optim;
+pub mod state;

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::model::gaussians::HostGaussians;
+use crate::model::state::ModelSnapshot;
 
 const MAGIC: &[u8; 8] = b"DFVKCKPT";
 
@@ -20,15 +21,10 @@ const MAGIC: &[u8; 8] = b"DFVKCKPT";
 pub struct Checkpoint {
     /// Iterations completed.
     pub iteration: u32,
-    pub gaussians: HostGaussians,
-    /// Adam moments of the Gaussians, same shapes as `gaussians`.
-    pub gauss_m: HostGaussians,
-    pub gauss_v: HostGaussians,
+    /// Parameters and Adam moments of the Gaussians and the MLP.
+    pub model: ModelSnapshot,
     /// Densification statistics per Gaussian: gradient accumulator, count, max radius.
     pub densify_stats: [Vec<f32>; 3],
-    pub mlp_params: Vec<f32>,
-    pub mlp_m: Vec<f32>,
-    pub mlp_v: Vec<f32>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -114,22 +110,22 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 impl Checkpoint {
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut blobs: Vec<(String, &[f32])> = Vec::new();
-        gauss_blobs("", &self.gaussians, &mut blobs);
-        gauss_blobs("m.", &self.gauss_m, &mut blobs);
-        gauss_blobs("v.", &self.gauss_v, &mut blobs);
+        gauss_blobs("", &self.model.gaussians, &mut blobs);
+        gauss_blobs("m.", &self.model.gauss_m, &mut blobs);
+        gauss_blobs("v.", &self.model.gauss_v, &mut blobs);
         for (k, v) in ["grad_accum", "denom", "max_radii"]
             .iter()
             .zip(&self.densify_stats)
         {
             blobs.push((k.to_string(), v));
         }
-        blobs.push(("mlp_params".into(), &self.mlp_params));
-        blobs.push(("mlp_m".into(), &self.mlp_m));
-        blobs.push(("mlp_v".into(), &self.mlp_v));
+        blobs.push(("mlp_params".into(), &self.model.mlp_params));
+        blobs.push(("mlp_m".into(), &self.model.mlp_m));
+        blobs.push(("mlp_v".into(), &self.model.mlp_v));
         let header = Header {
             version: 1,
             iteration: self.iteration,
-            sh_coeffs: self.gaussians.sh_coeffs,
+            sh_coeffs: self.model.gaussians.sh_coeffs,
             blobs: blobs
                 .iter()
                 .map(|(k, v)| (k.clone(), v.len() as u64))
@@ -201,13 +197,15 @@ impl Checkpoint {
         }
         Ok(Checkpoint {
             iteration: header.iteration,
-            gaussians,
-            gauss_m,
-            gauss_v,
+            model: ModelSnapshot {
+                gaussians,
+                gauss_m,
+                gauss_v,
+                mlp_params,
+                mlp_m,
+                mlp_v,
+            },
             densify_stats,
-            mlp_params,
-            mlp_m,
-            mlp_v,
         })
     }
 }

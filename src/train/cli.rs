@@ -7,10 +7,12 @@ use serde::Serialize;
 
 use super::checkpoint::{last_checkpoint, write_atomic, write_ply, Checkpoint};
 use super::config::{Background, Preset, TrainConfig};
-use super::{FrameEval, Trainer};
+use super::Trainer;
 use crate::data::synthetic::{self, Preset as ScenePreset};
 use crate::data::{self, LoadOptions};
 use crate::error::{Error, Result};
+use crate::eval::report::{mean, Report, ReportContext};
+use crate::eval::run::frame_png;
 use crate::vk::Gpu;
 
 #[derive(clap::Args, Debug, Clone, Default)]
@@ -87,66 +89,6 @@ pub struct TrainArgs {
     /// Print a per-kernel GPU time breakdown at every log line.
     #[arg(short, long)]
     pub verbose: bool,
-}
-
-/// What `train` writes to `metrics.json`.
-#[derive(Debug, Serialize)]
-pub struct Metrics {
-    pub psnr: f64,
-    pub ssim: f64,
-    pub l1: f64,
-    /// Test PSNR of the initial model (absent for a resumed run: it was measured by the first).
-    pub initial_psnr: Option<f64>,
-    pub iterations: u32,
-    pub num_gaussians: u32,
-    /// Median wall-clock milliseconds per training step (submit + wait).
-    pub ms_per_step: f64,
-    /// Mean over test frames with a non-empty motion mask of the displacement flow's AP
-    /// (present when the dataset has motion masks).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub mmap: Option<f64>,
-    /// Mean DRC over test frames that have an earlier time in the dataset.
-    pub drc: Option<f64>,
-    pub device: String,
-    pub dataset: String,
-    pub per_frame: Vec<FrameMetrics>,
-}
-
-#[derive(Debug, Serialize)]
-pub struct FrameMetrics {
-    pub id: String,
-    pub time: f32,
-    pub psnr: f64,
-    pub ssim: f64,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub ap: Option<f64>,
-    pub drc: Option<f64>,
-}
-
-impl FrameMetrics {
-    pub fn of(e: &FrameEval) -> FrameMetrics {
-        FrameMetrics {
-            id: e.id.clone(),
-            time: e.time,
-            psnr: e.values.psnr,
-            ssim: e.values.ssim,
-            ap: e.ap,
-            drc: e.drc,
-        }
-    }
-}
-
-/// MMAP (when any frame has a mask) and mean DRC of evaluated frames.
-pub fn motion_means(per: &[FrameEval]) -> (Option<f64>, Option<f64>) {
-    let any_mask = per.iter().any(|e| e.has_mask);
-    let mmap = if any_mask {
-        crate::kernels::metrics::mmap(per.iter().map(|e| e.ap))
-    } else {
-        None
-    };
-    let drcs: Vec<f64> = per.iter().filter_map(|e| e.drc).collect();
-    let drc = (!drcs.is_empty()).then(|| mean(&drcs));
-    (mmap, drc)
 }
 
 /// How a run loads its dataset (resolution, background of transparent images, seed).
@@ -250,7 +192,7 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
 }
 
 /// The whole `train` command. Returns the metrics it wrote.
-pub fn run(a: &TrainArgs) -> Result<Metrics> {
+pub fn run(a: &TrainArgs) -> Result<Report> {
     let cfg = resolve_config(a)?;
     let data_dir = match &a.data {
         Some(d) => d.clone(),
@@ -287,18 +229,13 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
         tr.val.len(),
         dataset.train[0].camera.width,
         dataset.train[0].camera.height,
-        tr.n,
+        tr.n(),
         cfg.mlp_depth,
         cfg.mlp_width,
         cfg.iterations
     );
     let initial_psnr = if tr.iteration == 0 {
-        Some(mean(
-            &tr.evaluate(false)?
-                .iter()
-                .map(|v| v.values.psnr)
-                .collect::<Vec<_>>(),
-        ))
+        Some(mean(tr.evaluate(false)?.iter().map(|v| v.psnr)))
     } else {
         None
     };
@@ -385,34 +322,28 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
     pb.finish_and_clear();
 
     let renders = out.join("renders");
-    let per = tr.evaluate(true)?;
-    for (i, e) in per.iter().enumerate() {
-        if let Some(im) = &e.images {
-            let path = renders.join(format!("{i:03}_{}.png", super::sanitize(&e.id)));
-            super::save_side_by_side(&path, im.width, im.height, &[&im.render, &im.gt])?;
+    let mut per = tr.evaluate(true)?;
+    for (i, e) in per.iter_mut().enumerate() {
+        if let Some(im) = e.images.take() {
+            let path = renders.join(frame_png(i, &e.id));
+            save_side_by_side(&path, im.width, im.height, &[&im.render, &im.gt])?;
         }
     }
-    let (mmap, drc) = motion_means(&per);
-    let g = tr.gaussians()?;
-    write_ply(&out.join("point_cloud.ply"), &g)?;
-    let mlp: Vec<f32> = gpu.read(tr.mlp_params.all())?;
+    write_ply(&out.join("point_cloud.ply"), &tr.gaussians()?)?;
+    let mlp = tr.model.deform.download(&gpu)?;
     write_atomic(&out.join("deform.bin"), bytemuck::cast_slice(&mlp))?;
-    let metrics = Metrics {
-        psnr: mean(&per.iter().map(|v| v.values.psnr).collect::<Vec<_>>()),
-        ssim: mean(&per.iter().map(|v| v.values.ssim).collect::<Vec<_>>()),
-        l1: mean(&per.iter().map(|v| v.values.l1).collect::<Vec<_>>()),
-        initial_psnr,
-        iterations: tr.iteration,
-        num_gaussians: tr.n,
-        ms_per_step: crate::bench::median(step_ms),
-        mmap,
-        drc,
-        device: gpu.info.to_string(),
+    let ctx = ReportContext {
+        run: out.display().to_string(),
+        scene: name,
         dataset: data_dir.display().to_string(),
-        per_frame: per.iter().map(FrameMetrics::of).collect(),
+        device: gpu.info.to_string(),
+        iterations: tr.iteration,
+        num_gaussians: tr.n(),
     };
-    let text = serde_json::to_string_pretty(&metrics).expect("metrics serialise");
-    write_atomic(&out.join("metrics.json"), text.as_bytes())?;
+    let mut metrics = Report::new(&cfg, ctx, per);
+    metrics.initial_psnr = initial_psnr;
+    metrics.ms_per_step = Some(crate::bench::median(step_ms));
+    write_atomic(&out.join("metrics.json"), metrics.to_json().as_bytes())?;
     let fmt = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.4}"));
     println!(
         "test PSNR {:.2} dB (initial {}), SSIM {:.4}, MMAP {}, DRC {}, {} Gaussians, {:.1} ms/step; outputs in {}",
@@ -424,18 +355,18 @@ pub fn run(a: &TrainArgs) -> Result<Metrics> {
         fmt(metrics.mmap),
         fmt(metrics.drc),
         metrics.num_gaussians,
-        metrics.ms_per_step,
+        metrics.ms_per_step.unwrap_or(f64::NAN),
         out.display()
     );
     Ok(metrics)
 }
 
-/// Mean of finite values (PSNR of a perfect frame is +∞ and would swamp it).
-fn mean(v: &[f64]) -> f64 {
-    let f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
-    if f.is_empty() {
-        f64::NAN
-    } else {
-        f.iter().sum::<f64>() / f.len() as f64
-    }
+/// Writes images (RGBA f32, alpha ignored) side by side as one 8-bit PNG.
+pub fn save_side_by_side(path: &Path, w: u32, h: u32, images: &[&[[f32; 4]]]) -> Result<()> {
+    let k = images.len() as u32;
+    let img = image::RgbImage::from_fn(w * k, h, |x, y| {
+        let p = images[(x / w) as usize][(y * w + x % w) as usize];
+        image::Rgb([0, 1, 2].map(|c| (p[c].clamp(0.0, 1.0) * 255.0).round() as u8))
+    });
+    crate::report::save_png(&img, path)
 }

@@ -1,0 +1,404 @@
+//! Evaluation: per-frame scores of a model (PSNR, SSIM, L1; the displacement flow's AP against
+//! the motion mask for MMAP; DRC; the AP of the optical flow the motion loss would learn from),
+//! one `metrics.json` schema for `train` and `eval` ([`report`]), and the `eval` and `render`
+//! commands ([`run`], [`render`]). The [`Evaluator`] owns its scratch: evaluating never
+//! touches a training buffer.
+
+pub mod render;
+pub mod report;
+pub mod run;
+
+use std::rc::Rc;
+
+use serde::Serialize;
+
+use crate::error::Result;
+use crate::kernels::dispflow::DispFlow;
+use crate::kernels::flow::{FlowConfig, FlowEstimator, FlowScratch, TvL1Flow};
+use crate::kernels::loss::LossValues;
+use crate::kernels::metrics::{MetricBuffers, MotionMetrics};
+use crate::kernels::motion::{MotionNorm, NormBuffers, NormConfig};
+use crate::kernels::raster::{Camera, Rasterizer, RenderOpts};
+use crate::model::deform::MlpConfig;
+use crate::model::gaussians::HostGaussians;
+use crate::model::state::Model;
+use crate::train::frames::GpuFrame;
+use crate::train::passes::{
+    row, DeformPass, OverflowWatch, PhotoLoss, RenderPass, Slot, StepSizes,
+};
+use crate::train::step::ALPHA_MAX;
+use crate::vk::{Buffer, Gpu, Recorder};
+
+pub use report::Report;
+
+/// How the model is drawn at some iteration: whether the deformation runs, the SH degree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ModelView {
+    pub deform_active: bool,
+    pub sh_degree: u32,
+}
+
+/// One evaluated view: its scores (the per-frame rows of `metrics.json`) and, on request, its
+/// pictures.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameEval {
+    pub id: String,
+    pub time: f32,
+    pub psnr: f64,
+    pub ssim: f64,
+    pub l1: f64,
+    /// The frame has a motion mask with at least one moving pixel.
+    pub has_mask: bool,
+    /// AP of the normalised displacement flow against the mask (`None`: no mask, an empty
+    /// mask, or no earlier time in the dataset).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ap: Option<f64>,
+    /// DRC (`None` without an earlier time).
+    pub drc: Option<f64>,
+    /// AP of the optical-flow magnitude (frozen render → ground truth) against the mask: the
+    /// quality of the signal the motion loss learns from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flow_ap: Option<f64>,
+    #[serde(skip)]
+    pub images: Option<FrameImages>,
+}
+
+/// Pictures of one evaluated view (host copies).
+#[derive(Clone, Debug)]
+pub struct FrameImages {
+    pub width: u32,
+    pub height: u32,
+    pub render: Vec<[f32; 4]>,
+    /// Ground truth (empty for a view without a frame).
+    pub gt: Vec<[f32; 4]>,
+    /// Min-max normalised displacement-flow magnitude F̂ ∈ [0, 1] (zeros without `t−1`).
+    pub motion: Vec<f32>,
+    /// Min-max normalised optical-flow magnitude frozen render → ground truth.
+    pub scene_motion: Option<Vec<f32>>,
+    pub mask: Option<Vec<u8>>,
+}
+
+/// Scratch of evaluation, sized like training's (one image size, the Gaussian budget).
+pub struct Evaluator {
+    deform: DeformPass,
+    render: RenderPass,
+    loss: PhotoLoss,
+    /// The render at (v, D(t)) kept while the same buffers draw the frozen (v, D(t−1)).
+    full: Buffer,
+    dispflow: DispFlow,
+    delta: Buffer,
+    norm: MotionNorm,
+    norm_bufs: NormBuffers,
+    metrics: MotionMetrics,
+    metric_bufs: MetricBuffers,
+    flow: TvL1Flow,
+    flow_scratch: FlowScratch,
+    scene_flow: Buffer,
+    scene_norm: NormBuffers,
+    scene_metric_bufs: MetricBuffers,
+    /// Overflow of the full render (slot 0) and the frozen one (slot 1).
+    watch: OverflowWatch,
+    lambda_ssim: f32,
+}
+
+impl Evaluator {
+    pub fn new(
+        gpu: &Gpu,
+        raster: Rc<Rasterizer>,
+        mlp: &MlpConfig,
+        s: &StepSizes,
+        flow: FlowConfig,
+        lambda_ssim: f32,
+    ) -> Result<Self> {
+        let (w, h) = (s.width, s.height);
+        let norm = MotionNorm::new(gpu)?;
+        let metrics = MotionMetrics::new(gpu)?;
+        let flow = TvL1Flow::new(gpu, flow)?;
+        Ok(Evaluator {
+            deform: DeformPass::new(gpu, mlp, s, 2, false)?,
+            render: RenderPass::new(raster, gpu, s, 3)?,
+            loss: PhotoLoss::new(gpu, s)?,
+            full: gpu.buffer("eval full render", s.pixels() * 16)?,
+            dispflow: DispFlow::new(gpu)?,
+            delta: gpu.buffer("eval displacement", s.capacity as u64 * row::VEC3 * 4)?,
+            norm_bufs: norm.buffers(gpu, w, h, 3)?,
+            metric_bufs: metrics.buffers(gpu, w, h)?,
+            flow_scratch: flow.scratch(gpu, w, h)?,
+            flow,
+            scene_flow: gpu.buffer("eval scene flow", s.pixels() * 8)?,
+            scene_norm: norm.buffers(gpu, w, h, 2)?,
+            scene_metric_bufs: metrics.buffers(gpu, w, h)?,
+            norm,
+            metrics,
+            watch: OverflowWatch::new(gpu, "eval overflow flags", 2)?,
+            lambda_ssim,
+        })
+    }
+
+    /// Evaluates test frame `f` at its view and time (black background): photometric values;
+    /// with a predecessor time `t−1`, the displacement flow δ = dx(t) − dx(t−1) splatted with
+    /// the weights of the render at (v, t), min-max normalised, scored against the mask (AP)
+    /// and by DRC against the frozen render (v, D(t−1)), plus the optical flow frozen → ground
+    /// truth scored the same way.
+    pub fn frame(
+        &mut self,
+        gpu: &Gpu,
+        model: &Model,
+        view: ModelView,
+        f: &GpuFrame,
+        want_images: bool,
+    ) -> Result<FrameEval> {
+        self.evaluate(
+            gpu,
+            model,
+            view,
+            &f.camera,
+            f.time,
+            f.prev_time,
+            Some(f),
+            want_images,
+        )
+    }
+
+    /// Renders `(camera, t)` (black background) and, with `prev`, the displacement flow since
+    /// `prev` (no scores: no ground truth).
+    #[allow(clippy::too_many_arguments)] // the view's parts, each one named
+    pub fn view(
+        &mut self,
+        gpu: &Gpu,
+        model: &Model,
+        view: ModelView,
+        camera: &Camera,
+        t: f32,
+        prev: Option<f32>,
+    ) -> Result<FrameEval> {
+        self.evaluate(gpu, model, view, camera, t, prev, None, true)
+    }
+
+    /// The Gaussians as drawn at time `t` in the canonical layout: a standard 3DGS model of
+    /// that instant (log of |scale|: the rasteriser squares it).
+    pub fn deformed_gaussians(
+        &mut self,
+        gpu: &Gpu,
+        model: &Model,
+        view: ModelView,
+        t: f32,
+    ) -> Result<HostGaussians> {
+        let mut rec = Recorder::new(gpu)?;
+        let time = view.deform_active.then_some(t);
+        self.deform.forward(&mut rec, model, Slot::T1, time);
+        rec.finish()?;
+        let mut g = model.gaussians.download(gpu)?;
+        let n = model.gaussians.n as usize;
+        let [m, s, q] = self.deform.drawn(Slot::T1);
+        let means: Vec<[f32; 3]> = gpu.read(m)?;
+        let scales: Vec<[f32; 3]> = gpu.read(s)?;
+        let quats: Vec<[f32; 4]> = gpu.read(q)?;
+        g.means = means[..n].to_vec();
+        g.log_scales = scales[..n]
+            .iter()
+            .map(|s| s.map(|v| v.abs().max(1e-12).ln()))
+            .collect();
+        g.quats = quats[..n]
+            .iter()
+            .map(|q| {
+                let l = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+                if l > 1e-12 {
+                    q.map(|v| v / l)
+                } else {
+                    [1.0, 0.0, 0.0, 0.0]
+                }
+            })
+            .collect();
+        Ok(g)
+    }
+
+    /// Records everything for one view and reads its scores; re-runs with grown buffers when a
+    /// render overflowed.
+    #[allow(clippy::too_many_arguments)] // the view's parts, each one named
+    fn evaluate(
+        &mut self,
+        gpu: &Gpu,
+        model: &Model,
+        view: ModelView,
+        cam: &Camera,
+        t: f32,
+        prev: Option<f32>,
+        frame: Option<&GpuFrame>,
+        want_images: bool,
+    ) -> Result<FrameEval> {
+        let px = cam.width as u64 * cam.height as u64;
+        let frozen = prev.is_some() && frame.is_some();
+        loop {
+            let mut rec = Recorder::new(gpu)?;
+            self.record(&mut rec, model, view, cam, t, prev, frame);
+            rec.finish()?;
+            let (full, froz) = (self.watch.read(0), self.watch.read(1));
+            if full.overflowed || (frozen && froz.overflowed) {
+                let need = full.needed.max(if frozen { froz.needed } else { 0 });
+                self.render.grow(gpu, need)?;
+                continue;
+            }
+            return self.scores(gpu, cam, t, prev, frame, want_images, px);
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)] // the view's parts, each one named
+    fn record(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        model: &Model,
+        view: ModelView,
+        cam: &Camera,
+        t: f32,
+        prev: Option<f32>,
+        frame: Option<&GpuFrame>,
+    ) {
+        let g = &model.gaussians;
+        let opts = RenderOpts {
+            background: [0.0; 3],
+            alpha_max: ALPHA_MAX,
+        };
+        let active = view.deform_active;
+        self.deform
+            .forward(rec, model, Slot::T1, active.then_some(t));
+        let mut splats = g.splats(self.deform.drawn(Slot::T1), view.sh_degree);
+        if let Some(tp) = prev {
+            if active {
+                self.deform.mlp_forward(rec, model, Slot::T2, tp);
+                let (a, b) = (self.deform.output(Slot::T2), self.deform.output(Slot::T1));
+                self.dispflow.displacement(rec, g.n, a, b, self.delta.all());
+            } else {
+                // No deformation yet: D ≡ 0 at every time, δ = 0.
+                rec.fill(self.delta.all(), 0);
+            }
+            self.deform.apply(rec, model, Slot::T2, active);
+            splats.features = Some((self.delta.all(), 3));
+        }
+        self.render.forward(rec, cam, &splats, &opts);
+        self.watch.record(rec, 0, &self.render);
+        if let Some(f) = frame {
+            self.loss
+                .record(rec, &self.render, f.target.all(), self.lambda_ssim);
+        }
+        let bytes = cam.width as u64 * cam.height as u64 * 16;
+        rec.copy(
+            self.render.bufs.out_rgba.slice(0, bytes),
+            self.full.slice(0, bytes),
+        );
+        if prev.is_some() {
+            let feat = self.render.features();
+            let cfg = NormConfig::default();
+            self.norm.record(rec, &mut self.norm_bufs, feat, cfg);
+            if let Some((mask, _)) = frame.and_then(|f| f.mask.as_ref()) {
+                let m_hat = self.norm_bufs.m_hat();
+                self.metrics
+                    .record_ap(rec, &self.metric_bufs, m_hat, mask.all());
+            }
+        }
+        let (Some(f), Some(_)) = (frame, prev) else {
+            return;
+        };
+        // The frozen render: the same view with the deformation of t−1.
+        let frozen = g.splats(self.deform.drawn(Slot::T2), view.sh_degree);
+        self.render.forward(rec, cam, &frozen, &opts);
+        self.watch.record(rec, 1, &self.render);
+        self.metrics.record_drc(
+            rec,
+            &self.metric_bufs,
+            self.norm_bufs.m_hat(),
+            self.render.rgba(),
+            self.full.all(),
+            f.target.all(),
+        );
+        let sf = self.scene_flow.all();
+        self.flow.record(
+            rec,
+            &self.flow_scratch,
+            self.render.rgba(),
+            f.target.all(),
+            sf,
+        );
+        self.norm
+            .record(rec, &mut self.scene_norm, sf, NormConfig::default());
+        if let Some((mask, _)) = &f.mask {
+            let m_hat = self.scene_norm.m_hat();
+            self.metrics
+                .record_ap(rec, &self.scene_metric_bufs, m_hat, mask.all());
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)] // the view's parts, each one named
+    fn scores(
+        &self,
+        gpu: &Gpu,
+        cam: &Camera,
+        t: f32,
+        prev: Option<f32>,
+        frame: Option<&GpuFrame>,
+        want_images: bool,
+        px: u64,
+    ) -> Result<FrameEval> {
+        let values = match frame {
+            Some(_) => self.loss.values(gpu)?,
+            None => LossValues::new(f64::NAN, f64::NAN, f64::NAN, self.lambda_ssim as f64),
+        };
+        let mask = frame.and_then(|f| f.mask.as_ref());
+        let ap = match (mask, prev) {
+            (Some(_), Some(_)) => self.metric_bufs.ap(gpu)?,
+            _ => None,
+        };
+        let (drc, flow_ap) = match frame.zip(prev) {
+            Some(_) => (
+                Some(self.metric_bufs.drc(gpu)?),
+                match mask {
+                    Some(_) => self.scene_metric_bufs.ap(gpu)?,
+                    None => None,
+                },
+            ),
+            None => (None, None),
+        };
+        let images = if want_images {
+            let n = px as usize;
+            let render: Vec<[f32; 4]> = gpu.read(self.full.elems::<[f32; 4]>(0, px))?;
+            let gt: Vec<[f32; 4]> = match frame {
+                Some(f) => gpu.read(f.target.elems::<[f32; 4]>(0, px))?,
+                None => Vec::new(),
+            };
+            let motion: Vec<f32> = match prev {
+                Some(_) => gpu.read(self.norm_bufs.m_hat())?,
+                None => vec![0.0; n],
+            };
+            let scene_motion = match frame.zip(prev) {
+                Some(_) => {
+                    let v: Vec<f32> = gpu.read(self.scene_norm.m_hat())?;
+                    Some(v[..n].to_vec())
+                }
+                None => None,
+            };
+            Some(FrameImages {
+                width: cam.width,
+                height: cam.height,
+                render,
+                gt,
+                motion: motion[..n].to_vec(),
+                scene_motion,
+                mask: mask.map(|m| m.1.clone()),
+            })
+        } else {
+            None
+        };
+        Ok(FrameEval {
+            id: frame.map_or_else(|| format!("t{t:.4}"), |f| f.id.clone()),
+            time: t,
+            psnr: values.psnr,
+            ssim: values.ssim,
+            l1: values.l1,
+            has_mask: mask.is_some_and(|m| m.1.iter().any(|&v| v != 0)),
+            ap,
+            drc,
+            flow_ap,
+            images,
+        })
+    }
+}

@@ -1,0 +1,155 @@
+//! The one `metrics.json` schema, written by `train` (`RUN/metrics.json`, with its training
+//! figures) and by `eval` (`RUN/eval/metrics.json`), and the paper-style Markdown table.
+
+use serde::Serialize;
+
+use super::FrameEval;
+use crate::report::{self, Table};
+use crate::train::config::{MotionFlow, MotionOrder, NormGrad, TrainConfig};
+
+/// Scores of a run on its test split.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    pub run: String,
+    pub method: String,
+    pub scene: String,
+    pub dataset: String,
+    pub device: String,
+    pub iterations: u32,
+    pub num_gaussians: u32,
+    pub psnr: f64,
+    pub ssim: f64,
+    pub l1: f64,
+    /// `None` (null) unless LPIPS weights were given; see `lpips_note`.
+    pub lpips: Option<f64>,
+    pub lpips_note: String,
+    /// Mean AP over test frames with a non-empty motion mask (present when the split has masks).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mmap: Option<f64>,
+    /// Mean DRC over test frames that have an earlier time in the dataset.
+    pub drc: Option<f64>,
+    /// MMAP of the optical flow frozen render → ground truth: how well the motion loss's
+    /// signal separates moving pixels.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flow_mmap: Option<f64>,
+    /// Test PSNR of the initial model (`train` only; absent for a resumed run).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub initial_psnr: Option<f64>,
+    /// Median wall-clock milliseconds per training step (`train` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ms_per_step: Option<f64>,
+    pub per_frame: Vec<FrameEval>,
+}
+
+/// What a report says about where it came from.
+pub struct ReportContext {
+    pub run: String,
+    pub scene: String,
+    pub dataset: String,
+    pub device: String,
+    pub iterations: u32,
+    pub num_gaussians: u32,
+}
+
+impl Report {
+    /// Means over the frames (non-finite PSNRs, e.g. of a perfect frame, left out).
+    pub fn new(cfg: &TrainConfig, c: ReportContext, per: Vec<FrameEval>) -> Report {
+        let (mmap, drc) = motion_means(&per);
+        let flow_mmap = mmap.and(crate::kernels::metrics::mmap(per.iter().map(|e| e.flow_ap)));
+        Report {
+            run: c.run,
+            method: method_name(cfg),
+            scene: c.scene,
+            dataset: c.dataset,
+            device: c.device,
+            iterations: c.iterations,
+            num_gaussians: c.num_gaussians,
+            psnr: mean(per.iter().map(|e| e.psnr)),
+            ssim: mean(per.iter().map(|e| e.ssim)),
+            l1: mean(per.iter().map(|e| e.l1)),
+            lpips: None,
+            lpips_note: "unavailable: no --lpips-weights given".into(),
+            mmap,
+            drc,
+            flow_mmap,
+            initial_psnr: None,
+            ms_per_step: None,
+            per_frame: per,
+        }
+    }
+
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("report serialises")
+    }
+}
+
+/// MMAP (when any frame has a mask) and mean DRC of evaluated frames.
+pub fn motion_means(per: &[FrameEval]) -> (Option<f64>, Option<f64>) {
+    let mmap = if per.iter().any(|e| e.has_mask) {
+        crate::kernels::metrics::mmap(per.iter().map(|e| e.ap))
+    } else {
+        None
+    };
+    let drcs: Vec<f64> = per.iter().filter_map(|e| e.drc).collect();
+    let drc = (!drcs.is_empty()).then(|| drcs.iter().sum::<f64>() / drcs.len() as f64);
+    (mmap, drc)
+}
+
+/// Mean of the finite values (NaN when there are none).
+pub fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let f: Vec<f64> = v.filter(|x| x.is_finite()).collect();
+    if f.is_empty() {
+        f64::NAN
+    } else {
+        f.iter().sum::<f64>() / f.len() as f64
+    }
+}
+
+/// "DispFlow-GS (α=0.1)" or "Deformable-3DGS" from the run's configuration.
+pub fn method_name(cfg: &TrainConfig) -> String {
+    if cfg.motion_weight <= 0.0 {
+        return "Deformable-3DGS".into();
+    }
+    let mut extra = String::new();
+    if cfg.motion_order == MotionOrder::Reverse {
+        extra += ", reverse order";
+    }
+    if cfg.motion_norm_grad == NormGrad::Full {
+        extra += ", full norm grad";
+    }
+    if cfg.motion_flow == MotionFlow::Oracle {
+        extra += ", oracle flow";
+    }
+    format!("DispFlow-GS (α={}{extra})", cfg.motion_weight)
+}
+
+const TABLE_HEADERS: [&str; 7] = [
+    "Method",
+    "Scene",
+    "PSNR ↑",
+    "SSIM ↑",
+    "LPIPS ↓",
+    "MMAP ↑",
+    "DRC ↑",
+];
+
+/// The paper-style table (a row per run, metric columns).
+pub fn table(reports: &[Report]) -> Table {
+    Table {
+        headers: TABLE_HEADERS.iter().map(|s| s.to_string()).collect(),
+        rows: reports
+            .iter()
+            .map(|r| {
+                vec![
+                    format!("{} [{}]", r.method, r.run),
+                    r.scene.clone(),
+                    report::fmt_metric(Some(r.psnr), 2),
+                    report::fmt_metric(Some(r.ssim), 4),
+                    report::fmt_metric(r.lpips, 4),
+                    report::fmt_metric(r.mmap, 4),
+                    report::fmt_metric(r.drc, 4),
+                ]
+            })
+            .collect(),
+    }
+}

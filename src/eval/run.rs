@@ -1,0 +1,342 @@
+//! `dispflow-vk eval`: reopen a trained run directory (its `config.toml`, `metrics.json`,
+//! `point_cloud.ply`, `deform.bin`), score it on the test split and draw what a person wants
+//! to look at.
+
+use std::path::{Path, PathBuf};
+
+use super::report::{table, Report, ReportContext};
+use super::{FrameEval, FrameImages};
+use crate::data::{self, Dataset};
+use crate::error::{Error, Result};
+use crate::model::gaussians::HostGaussians;
+use crate::report::{self, Plot, Series, PALETTE};
+use crate::train::checkpoint::{read_ply, write_atomic};
+use crate::train::cli::{load_options, LogLine};
+use crate::train::config::TrainConfig;
+use crate::train::Trainer;
+use crate::vk::Gpu;
+
+/// A trained run as written by `dispflow-vk train`.
+pub struct Run {
+    pub dir: PathBuf,
+    pub cfg: TrainConfig,
+    pub data_dir: PathBuf,
+    pub iterations: u32,
+    pub gaussians: HostGaussians,
+    pub mlp: Vec<f32>,
+}
+
+fn invalid(path: &Path, why: impl std::fmt::Display) -> Error {
+    Error::Invalid(format!("{}: {why}", path.display()))
+}
+
+/// Reads a run directory, checking every file it needs; `data` overrides the dataset path
+/// recorded in `metrics.json`.
+pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
+    if !dir.is_dir() {
+        return Err(invalid(
+            dir,
+            "not a directory; expected a run directory written by `dispflow-vk train`",
+        ));
+    }
+    let need = |name: &str| -> Result<PathBuf> {
+        let p = dir.join(name);
+        if p.is_file() {
+            Ok(p)
+        } else {
+            Err(invalid(
+                &p,
+                "missing; a finished `dispflow-vk train` run writes config.toml, metrics.json, \
+                 point_cloud.ply and deform.bin",
+            ))
+        }
+    };
+    let cfg = TrainConfig::from_toml_over(&TrainConfig::paper(), &need("config.toml")?)?;
+    let metrics_path = need("metrics.json")?;
+    let text = std::fs::read_to_string(&metrics_path).map_err(|source| Error::Io {
+        path: metrics_path.display().to_string(),
+        source,
+    })?;
+    let m: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| invalid(&metrics_path, e))?;
+    let iterations = m["iterations"]
+        .as_u64()
+        .and_then(|v| u32::try_from(v).ok())
+        .ok_or_else(|| {
+            invalid(
+                &metrics_path,
+                "field `iterations`: expected a non-negative integer",
+            )
+        })?;
+    let data_dir =
+        match data {
+            Some(d) => d.to_path_buf(),
+            None => PathBuf::from(m["dataset"].as_str().ok_or_else(|| {
+                invalid(&metrics_path, "field `dataset`: expected the dataset path")
+            })?),
+        };
+    if !data_dir.is_dir() {
+        return Err(invalid(
+            &data_dir,
+            "the run's dataset is not there; pass --data DIR",
+        ));
+    }
+    let gaussians = read_ply(&need("point_cloud.ply")?)?;
+    let weights = need("deform.bin")?;
+    let bytes = std::fs::read(&weights).map_err(|source| Error::Io {
+        path: weights.display().to_string(),
+        source,
+    })?;
+    if bytes.len() % 4 != 0 {
+        return Err(invalid(
+            &weights,
+            format!("{} bytes is not a whole number of f32", bytes.len()),
+        ));
+    }
+    let mlp: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes);
+    Ok(Run {
+        dir: dir.to_path_buf(),
+        cfg,
+        data_dir,
+        iterations,
+        gaussians,
+        mlp,
+    })
+}
+
+/// Loads the run's dataset and a trainer holding its model.
+pub fn load_trainer<'g>(gpu: &'g Gpu, run: &Run) -> Result<(Dataset, Trainer<'g>)> {
+    let ds = data::load(&run.data_dir, &load_options(&run.cfg))?;
+    let mut tr = Trainer::new(gpu, &run.cfg, &ds)?;
+    tr.load_model(&run.gaussians, &run.mlp, run.iterations)
+        .map_err(|e| invalid(&run.dir, format!("the saved model does not load: {e}")))?;
+    Ok((ds, tr))
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct EvalArgs {
+    /// Run directory written by `dispflow-vk train` (repeat for several runs: one combined
+    /// table with a row per run).
+    #[arg(long, required = true)]
+    pub run: Vec<PathBuf>,
+    /// Dataset directory [default: the one recorded in the run's metrics.json].
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// LPIPS network weights. Without it the LPIPS column reads "n/a" (never a made-up number).
+    #[arg(long)]
+    pub lpips_weights: Option<PathBuf>,
+    /// Where the combined table of several runs goes [default: print it only].
+    #[arg(long)]
+    pub table: Option<PathBuf>,
+    /// Skip the PNG strips and plots (metrics and tables only).
+    #[arg(long)]
+    pub no_pictures: bool,
+}
+
+/// Runs `eval` over every `--run`; returns the reports (each also written to `DIR/eval/`).
+pub fn run_eval(a: &EvalArgs) -> Result<Vec<Report>> {
+    if let Some(w) = &a.lpips_weights {
+        return Err(invalid(
+            w,
+            "LPIPS needs its backbone network, which this build does not implement yet; run \
+             without --lpips-weights (the LPIPS column then reads n/a)",
+        ));
+    }
+    // Every run is checked before the first (slow) evaluation starts.
+    let runs = a
+        .run
+        .iter()
+        .map(|d| open_run(d, a.data.as_deref()))
+        .collect::<Result<Vec<_>>>()?;
+    let gpu = Gpu::new_default()?;
+    eprintln!("device: {}", gpu.info);
+    let mut reports = Vec::new();
+    for run in &runs {
+        let r = eval_one(&gpu, run, !a.no_pictures)?;
+        reports.push(r);
+    }
+    let t = table(&reports).to_markdown();
+    if let Some(p) = &a.table {
+        write_atomic(p, t.as_bytes())?;
+    }
+    println!("{t}");
+    Ok(reports)
+}
+
+fn eval_one(gpu: &Gpu, run: &Run, pictures: bool) -> Result<Report> {
+    let (ds, mut tr) = load_trainer(gpu, run)?;
+    if tr.val.is_empty() {
+        return Err(invalid(&run.data_dir, "the dataset has no test frames"));
+    }
+    let out = run.dir.join("eval");
+    let pb = progress(tr.val.len() as u64, "eval");
+    pb.set_message(run.dir.display().to_string());
+    let mut per = Vec::with_capacity(tr.val.len());
+    for i in 0..tr.val.len() {
+        let mut e = tr.evaluate_one(i, pictures)?;
+        if let Some(im) = e.images.take() {
+            let path = out.join("frames").join(frame_png(i, &e.id));
+            report::save_png(&frame_strip(&im)?, &path)?;
+        }
+        per.push(e);
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let scene = ds
+        .root
+        .file_name()
+        .map_or_else(|| "scene".into(), |s| s.to_string_lossy().into_owned());
+    let ctx = ReportContext {
+        run: run.dir.display().to_string(),
+        scene,
+        dataset: run.data_dir.display().to_string(),
+        device: gpu.info.to_string(),
+        iterations: run.iterations,
+        num_gaussians: tr.n(),
+    };
+    let r = Report::new(&run.cfg, ctx, per);
+    write_atomic(&out.join("metrics.json"), r.to_json().as_bytes())?;
+    let t = table(std::slice::from_ref(&r)).to_markdown();
+    write_atomic(&out.join("table.md"), t.as_bytes())?;
+    if pictures {
+        report::save_png(&per_frame_plot(&r.per_frame)?, &out.join("per_frame.png"))?;
+        let log = run.dir.join("log.jsonl");
+        if log.is_file() {
+            report::save_png(&training_plot(&read_log(&log)?)?, &out.join("training.png"))?;
+        } else {
+            eprintln!(
+                "{}: no training log (older run); skipping training.png",
+                log.display()
+            );
+        }
+    }
+    eprintln!(
+        "{}: PSNR {:.2} SSIM {:.4} MMAP {} DRC {} (optical-flow MMAP {}) → {}",
+        run.dir.display(),
+        r.psnr,
+        r.ssim,
+        report::fmt_metric(r.mmap, 4),
+        report::fmt_metric(r.drc, 4),
+        report::fmt_metric(r.flow_mmap, 4),
+        out.display()
+    );
+    Ok(r)
+}
+
+/// A progress bar with ETA for `len` items of `what`.
+pub fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
+    let pb = indicatif::ProgressBar::new(len);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template(&format!(
+            "{what} {{bar:30}} {{pos}}/{{len}} [{{elapsed_precise}}<{{eta_precise}}] {{msg}}"
+        ))
+        .expect("progress template"),
+    );
+    pb
+}
+
+/// `NNN_<id>.png` with the id made file-name safe.
+pub fn frame_png(i: usize, id: &str) -> String {
+    let safe: String = id
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("{i:03}_{safe}.png")
+}
+
+/// render | ground truth | error | displacement flow | optical flow (frozen render → ground
+/// truth) | motion mask (when present).
+pub fn frame_strip(im: &FrameImages) -> Result<image::RgbImage> {
+    let (w, h) = (im.width, im.height);
+    let mut panels = vec![("render", report::rgb_image(&im.render, w, h)?)];
+    if !im.gt.is_empty() {
+        panels.push(("ground truth", report::rgb_image(&im.gt, w, h)?));
+        panels.push(("|error|", report::error_map(&im.render, &im.gt, w, h)?));
+    }
+    panels.push(("disp. flow", report::heatmap(&im.motion, w, h)?));
+    if !im.gt.is_empty() {
+        // Black without an earlier time, so every strip of a run has the same panels.
+        let zeros = vec![0.0; (w * h) as usize];
+        let sm = im.scene_motion.as_ref().unwrap_or(&zeros);
+        panels.push(("optical flow", report::heatmap(sm, w, h)?));
+    }
+    if let Some(m) = &im.mask {
+        panels.push(("motion mask", report::mask_image(m, w, h)?));
+    }
+    let refs: Vec<(&str, &image::RgbImage)> = panels.iter().map(|(l, i)| (*l, i)).collect();
+    report::labelled_strip(&refs)
+}
+
+fn per_frame_plot(per: &[FrameEval]) -> Result<image::RgbImage> {
+    let mut sorted: Vec<&FrameEval> = per.iter().collect();
+    sorted.sort_by(|a, b| a.time.total_cmp(&b.time));
+    let series = |label: &str, f: &dyn Fn(&FrameEval) -> Option<f64>, c: usize| Series {
+        label: label.into(),
+        points: sorted
+            .iter()
+            .filter_map(|e| f(e).map(|v| (e.time as f64, v)))
+            .collect(),
+        color: PALETTE[c],
+    };
+    let psnr = Plot {
+        title: "test PSNR per frame".into(),
+        x_label: "time".into(),
+        y_label: "PSNR (dB)".into(),
+        series: vec![series("PSNR", &|e| Some(e.psnr), 0)],
+        width: 640,
+        height: 240,
+    };
+    let motion = Plot {
+        title: "motion metrics per frame".into(),
+        x_label: "time".into(),
+        y_label: "score".into(),
+        series: vec![
+            series("AP (MMAP)", &|e| e.ap, 1),
+            series("DRC", &|e| e.drc, 2),
+        ],
+        width: 640,
+        height: 240,
+    };
+    report::stacked(&[psnr.render()?, motion.render()?])
+}
+
+/// Reads a run's `log.jsonl`, naming the line of a malformed entry.
+pub fn read_log(path: &Path) -> Result<Vec<LogLine>> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, l)| {
+            serde_json::from_str(l).map_err(|e| invalid(path, format!("line {}: {e}", i + 1)))
+        })
+        .collect()
+}
+
+fn training_plot(log: &[LogLine]) -> Result<image::RgbImage> {
+    let plot = |title: &str, y: &str, f: &dyn Fn(&LogLine) -> f64, c: usize| Plot {
+        title: title.into(),
+        x_label: "iteration".into(),
+        y_label: y.into(),
+        series: vec![Series {
+            label: String::new(),
+            points: log.iter().map(|l| (l.iteration as f64, f(l))).collect(),
+            color: PALETTE[c],
+        }],
+        width: 640,
+        height: 200,
+    };
+    report::stacked(&[
+        plot("training loss", "loss", &|l| l.loss, 0).render()?,
+        plot("training-view PSNR", "PSNR (dB)", &|l| l.psnr, 1).render()?,
+        plot("Gaussians", "count", &|l| l.num_gaussians as f64, 2).render()?,
+    ])
+}

@@ -1,0 +1,292 @@
+//! The trainable state on the GPU: canonical Gaussians (parameters, gradients, Adam moments and
+//! the buffers densification writes the next generation into) and the deformation MLP
+//! (weights, gradients, Adam moments). Passes read and write it through explicit slices; the
+//! trainer never reaches into a pass for model data.
+
+use super::deform::{MlpConfig, MlpLayout, TimeEncoding};
+use super::gaussians::{GaussianLayout, HostGaussians, Section};
+use crate::error::{Error, Result};
+use crate::kernels::deform::Canonical;
+use crate::kernels::raster::SplatInputs;
+use crate::vk::{BufSlice, Buffer, Gpu, Recorder};
+
+/// Canonical Gaussians for a fixed capacity (the densification budget), rows `0..n` live.
+pub struct GaussianState {
+    pub layout: GaussianLayout,
+    /// Live Gaussians.
+    pub n: u32,
+    pub params: Buffer,
+    pub grads: Buffer,
+    pub m: Buffer,
+    pub v: Buffer,
+    /// Densification writes (params, m, v) of the next generation here; see
+    /// [`GaussianState::swap_generation`].
+    pub next: [Buffer; 3],
+}
+
+impl GaussianState {
+    /// Allocates every buffer for `capacity` Gaussians and uploads `init` (moments zeroed).
+    pub fn new(gpu: &Gpu, capacity: u32, sh_degree: u32, init: &HostGaussians) -> Result<Self> {
+        let layout = GaussianLayout::new(capacity, sh_degree);
+        if init.len() > capacity as usize {
+            return Err(Error::Capacity {
+                what: "Gaussian budget (initial points)",
+                capacity: capacity as u64,
+                asked: init.len() as u64,
+            });
+        }
+        let bytes = layout.total_floats() * 4;
+        let mk = |name: &str| gpu.buffer(name, bytes);
+        let s = GaussianState {
+            layout,
+            n: init.len() as u32,
+            params: mk("gaussian params")?,
+            grads: mk("gaussian grads")?,
+            m: mk("gaussian adam m")?,
+            v: mk("gaussian adam v")?,
+            next: [
+                mk("gaussian params next")?,
+                mk("gaussian adam m next")?,
+                mk("gaussian adam v next")?,
+            ],
+        };
+        init.upload(gpu, &layout, &s.params)?;
+        let mut rec = Recorder::new(gpu)?;
+        rec.fill(s.m.all(), 0);
+        rec.fill(s.v.all(), 0);
+        rec.finish()?;
+        Ok(s)
+    }
+
+    /// After densification wrote the next generation (`next`) with `n` Gaussians: make it the
+    /// current one (the old buffers become the next scratch).
+    pub fn swap_generation(&mut self, n: u32) {
+        let [p, m, v] = &mut self.next;
+        std::mem::swap(&mut self.params, p);
+        std::mem::swap(&mut self.m, m);
+        std::mem::swap(&mut self.v, v);
+        self.n = n;
+    }
+
+    /// Rows `0..n` of section `s` of the parameters.
+    pub fn param(&self, s: Section) -> BufSlice<'_> {
+        self.layout.slice(&self.params, s, self.n)
+    }
+
+    /// Rows `0..n` of section `s` of the gradients.
+    pub fn grad(&self, s: Section) -> BufSlice<'_> {
+        self.layout.slice(&self.grads, s, self.n)
+    }
+
+    /// Canonical means, log-scales and quaternions of the parameters.
+    pub fn canonical(&self) -> Canonical<'_> {
+        Canonical {
+            means: self.param(Section::Means),
+            log_scales: self.param(Section::LogScales),
+            quats: self.param(Section::Quats),
+        }
+    }
+
+    /// The same sections of the gradients.
+    pub fn canonical_grads(&self) -> Canonical<'_> {
+        Canonical {
+            means: self.grad(Section::Means),
+            log_scales: self.grad(Section::LogScales),
+            quats: self.grad(Section::Quats),
+        }
+    }
+
+    /// What the rasteriser reads: the drawn geometry `drawn` (means, scales, quats) with the
+    /// canonical opacity and SH sections.
+    pub fn splats<'a>(&'a self, drawn: [BufSlice<'a>; 3], sh_degree: u32) -> SplatInputs<'a> {
+        SplatInputs {
+            n: self.n,
+            means: drawn[0],
+            scales: drawn[1],
+            quats: drawn[2],
+            opacity_logits: self.param(Section::Opacity),
+            sh_dc: self.param(Section::ShDc),
+            sh_rest: self.param(Section::ShRest),
+            sh_coeffs: self.layout.sh_coeffs,
+            sh_degree,
+            features: None,
+        }
+    }
+
+    pub fn download(&self, gpu: &Gpu) -> Result<HostGaussians> {
+        HostGaussians::download(gpu, &self.layout, &self.params, self.n)
+    }
+
+    /// Replaces the live Gaussians by `g` (parameters only; moments untouched).
+    pub fn upload(&mut self, gpu: &Gpu, g: &HostGaussians, what: &'static str) -> Result<()> {
+        if g.sh_coeffs != self.layout.sh_coeffs {
+            return Err(Error::Invalid(format!(
+                "{what}: the Gaussians carry {} SH coefficients; the configuration expects {}",
+                g.sh_coeffs, self.layout.sh_coeffs
+            )));
+        }
+        if g.len() > self.layout.capacity as usize {
+            return Err(Error::Capacity {
+                what,
+                capacity: self.layout.capacity as u64,
+                asked: g.len() as u64,
+            });
+        }
+        g.upload(gpu, &self.layout, &self.params)?;
+        self.n = g.len() as u32;
+        Ok(())
+    }
+}
+
+/// The deformation MLP's trainable state.
+pub struct DeformState {
+    pub cfg: MlpConfig,
+    pub layout: MlpLayout,
+    pub params: Buffer,
+    pub grads: Buffer,
+    pub m: Buffer,
+    pub v: Buffer,
+}
+
+impl DeformState {
+    /// Initialised weights (`seed`); with `zero_head` the head starts at exactly 0, so D = 0
+    /// when the warm-up ends and training continues the static model instead of jolting every
+    /// Gaussian by a random head (PyTorch-init displacements ~0.1–0.5 scene units, and ds ≫
+    /// exp(s) inflates every Gaussian). The head still gets gradients at once.
+    pub fn new(gpu: &Gpu, cfg: MlpConfig, seed: u64, zero_head: bool) -> Result<Self> {
+        let layout = MlpLayout::new(&cfg)?;
+        let mut init = layout.init_params(seed);
+        if zero_head {
+            let h = layout.head();
+            init[h.w_off..h.w_off + h.fan_in * h.fan_out].fill(0.0);
+            init[h.b_off..h.b_off + h.fan_out].fill(0.0);
+        }
+        let zeros = vec![0f32; init.len()];
+        Ok(DeformState {
+            cfg,
+            params: gpu.buffer_from("mlp params", &init)?,
+            grads: gpu.buffer_from("mlp grads", &zeros)?,
+            m: gpu.buffer_from("mlp adam m", &zeros)?,
+            v: gpu.buffer_from("mlp adam v", &zeros)?,
+            layout,
+        })
+    }
+
+    /// Weights on the host.
+    pub fn download(&self, gpu: &Gpu) -> Result<Vec<f32>> {
+        gpu.read(self.params.all())
+    }
+
+    fn check_len(&self, len: usize, what: &str) -> Result<()> {
+        if len != self.layout.total {
+            return Err(Error::Invalid(format!(
+                "{what}: {len} floats; this configuration's MLP ({}×{}) has {}",
+                self.cfg.depth, self.cfg.width, self.layout.total
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The MLP configuration of a run: Deformable-3DGS's encodings for the dataset's kind
+/// (synthetic scenes: γ(t) with L=6 through a time net; real captures: γ(t) with L=10) at the
+/// configured depth and width, the skip at the middle layer.
+pub fn mlp_config_for(synthetic: bool, depth: u32, width: u32) -> MlpConfig {
+    let base = if synthetic {
+        MlpConfig::synthetic()
+    } else {
+        MlpConfig::real()
+    };
+    let time = match base.time {
+        TimeEncoding::TimeNet { freqs, out, .. } => TimeEncoding::TimeNet {
+            freqs,
+            hidden: width,
+            out,
+        },
+        t => t,
+    };
+    MlpConfig {
+        depth,
+        width,
+        skip: (depth >= 3).then_some(depth / 2).filter(|&s| s + 1 < depth),
+        x_freqs: base.x_freqs,
+        time,
+    }
+}
+
+/// Everything that is trained: canonical Gaussians and the deformation network.
+pub struct Model {
+    pub gaussians: GaussianState,
+    pub deform: DeformState,
+}
+
+/// The model's part of a checkpoint (parameters and Adam moments; the trainer adds its
+/// densification statistics and the iteration).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ModelSnapshot {
+    pub gaussians: HostGaussians,
+    pub gauss_m: HostGaussians,
+    pub gauss_v: HostGaussians,
+    pub mlp_params: Vec<f32>,
+    pub mlp_m: Vec<f32>,
+    pub mlp_v: Vec<f32>,
+}
+
+impl Model {
+    /// Reads parameters and moments back.
+    pub fn checkpoint(&self, gpu: &Gpu) -> Result<ModelSnapshot> {
+        let g = &self.gaussians;
+        let d = &self.deform;
+        Ok(ModelSnapshot {
+            gaussians: g.download(gpu)?,
+            gauss_m: HostGaussians::download(gpu, &g.layout, &g.m, g.n)?,
+            gauss_v: HostGaussians::download(gpu, &g.layout, &g.v, g.n)?,
+            mlp_params: gpu.read(d.params.all())?,
+            mlp_m: gpu.read(d.m.all())?,
+            mlp_v: gpu.read(d.v.all())?,
+        })
+    }
+
+    /// Restores parameters and moments written by [`Model::checkpoint`] of a model with the
+    /// same configuration.
+    pub fn restore(&mut self, gpu: &Gpu, s: &ModelSnapshot) -> Result<()> {
+        self.deform
+            .check_len(s.mlp_params.len(), "checkpoint MLP weights")?;
+        let g = &mut self.gaussians;
+        g.upload(gpu, &s.gaussians, "Gaussian budget (checkpoint)")?;
+        s.gauss_m.upload(gpu, &g.layout, &g.m)?;
+        s.gauss_v.upload(gpu, &g.layout, &g.v)?;
+        let d = &self.deform;
+        gpu.upload(d.params.all(), &s.mlp_params)?;
+        gpu.upload(d.m.all(), &s.mlp_m)?;
+        gpu.upload(d.v.all(), &s.mlp_v)?;
+        Ok(())
+    }
+
+    /// Replaces the parameters by a trained model (a run's `point_cloud.ply` and `deform.bin`),
+    /// refusing non-finite values and mismatched shapes.
+    pub fn load(&mut self, gpu: &Gpu, g: &HostGaussians, mlp: &[f32]) -> Result<()> {
+        self.deform.check_len(mlp.len(), "deformation weights")?;
+        let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        if let Some(i) = (0..g.len()).find(|&i| {
+            !(finite(&g.means[i])
+                && finite(&g.log_scales[i])
+                && finite(&g.quats[i])
+                && g.opacity[i].is_finite()
+                && finite(&g.sh_dc[i]))
+        }) {
+            return Err(Error::Invalid(format!(
+                "Gaussian {i} has a non-finite parameter"
+            )));
+        }
+        if !finite(mlp) {
+            return Err(Error::Invalid(
+                "deformation weights contain a non-finite value".into(),
+            ));
+        }
+        self.gaussians
+            .upload(gpu, g, "Gaussian budget (loaded model)")?;
+        gpu.upload(self.deform.params.all(), mlp)?;
+        Ok(())
+    }
+}

@@ -1,0 +1,162 @@
+//! The deformation pass: D(x, t) by the MLP and its composition with the canonical Gaussians,
+//! forward and backward, over one or more time slots (a DispFlow step evaluates D at t1 and t2).
+
+use super::{row, StepSizes};
+use crate::error::Result;
+use crate::kernels::deform::{DeformApply, Drawn};
+use crate::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
+use crate::model::deform::MlpConfig;
+use crate::model::gaussians::Section;
+use crate::model::state::Model;
+use crate::vk::{BufSlice, Buffer, Gpu, Recorder};
+
+/// A time slot of the pass.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Slot {
+    /// The rendered time t1 (or the evaluated time).
+    T1 = 0,
+    /// The pair's time t2 (or the evaluated time's predecessor).
+    T2 = 1,
+}
+
+/// Scratch of one time: MLP activations, its output and gradient [N,10], the drawn geometry.
+struct SlotBuffers {
+    mlp: MlpBuffers,
+    out: Buffer,
+    d_out: Option<Buffer>,
+    drawn: [Buffer; 3],
+}
+
+pub struct DeformPass {
+    mlp: Mlp,
+    apply: DeformApply,
+    slots: Vec<SlotBuffers>,
+}
+
+impl DeformPass {
+    /// `slots` time slots (1 or 2); `backward`: also the MLP-output gradients.
+    pub fn new(
+        gpu: &Gpu,
+        cfg: &MlpConfig,
+        s: &StepSizes,
+        slots: usize,
+        backward: bool,
+    ) -> Result<Self> {
+        let mlp = Mlp::new(gpu, cfg)?;
+        let cap = s.capacity as u64;
+        let slots = (0..slots)
+            .map(|k| {
+                let name = |what: &str| format!("{what} (time slot {k})");
+                let rows = |what: &str, floats: u64| gpu.buffer(&name(what), cap * floats * 4);
+                Ok(SlotBuffers {
+                    mlp: mlp.buffers(gpu, s.capacity)?,
+                    out: rows("deformation", row::DEFORM)?,
+                    d_out: backward
+                        .then(|| rows("deformation grads", row::DEFORM))
+                        .transpose()?,
+                    drawn: [
+                        rows("drawn means", row::VEC3)?,
+                        rows("drawn scales", row::VEC3)?,
+                        rows("drawn quats", row::QUAT)?,
+                    ],
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(DeformPass {
+            mlp,
+            apply: DeformApply::new(gpu)?,
+            slots,
+        })
+    }
+
+    fn slot(&self, k: Slot) -> &SlotBuffers {
+        &self.slots[k as usize]
+    }
+
+    /// The drawn (deformed) means, scales and rotations of slot `k`.
+    pub fn drawn(&self, k: Slot) -> [BufSlice<'_>; 3] {
+        self.slot(k).drawn.each_ref().map(|b| b.all())
+    }
+
+    /// The MLP output [N,10] of slot `k`.
+    pub fn output(&self, k: Slot) -> BufSlice<'_> {
+        self.slot(k).out.all()
+    }
+
+    /// The gradient wrt the MLP output of slot `k`.
+    pub fn output_grad(&self, k: Slot) -> BufSlice<'_> {
+        self.slot(k).d_out.as_ref().expect("a backward pass").all()
+    }
+
+    /// D(·, t) by the MLP into slot `k` (the MLP sees the canonical means, detached).
+    pub fn mlp_forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32) {
+        let (g, s) = (&model.gaussians, self.slot(k));
+        let means = g.param(Section::Means);
+        let params = model.deform.params.all();
+        self.mlp.forward(
+            rec,
+            &s.mlp,
+            g.n,
+            means,
+            MlpTime::Batch(t),
+            params,
+            s.out.all(),
+        );
+    }
+
+    /// Composes the canonical Gaussians with slot `k`'s MLP output (`deformed`) or with D ≡ 0.
+    pub fn apply(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, deformed: bool) {
+        let (g, s) = (&model.gaussians, self.slot(k));
+        let d = deformed.then(|| s.out.all());
+        self.apply
+            .forward(rec, g.n, &g.canonical(), d, &drawn_of(&s.drawn));
+    }
+
+    /// D at `t` (`None`: D ≡ 0, the warm-up) applied into slot `k`.
+    pub fn forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: Option<f32>) {
+        if let Some(t) = t {
+            self.mlp_forward(rec, model, k, t);
+        }
+        self.apply(rec, model, k, t.is_some());
+    }
+
+    /// Gradients wrt slot `k`'s drawn geometry → the canonical means/log-scales/quaternion
+    /// gradients and, when `deformed`, ∂L/∂(dx, dr, ds) of the slot.
+    pub fn backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        model: &Model,
+        k: Slot,
+        d_drawn: &Drawn<'_>,
+        deformed: bool,
+    ) {
+        let g = &model.gaussians;
+        let d_out = deformed.then(|| self.output_grad(k));
+        let grads = g.canonical_grads();
+        self.apply
+            .backward(rec, g.n, &g.canonical(), d_drawn, &grads, d_out);
+    }
+
+    /// The MLP's weight gradients from slot `k`'s output gradient, written into the model's
+    /// MLP gradient buffer or added to it (`accumulate`).
+    pub fn mlp_backward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, accumulate: bool) {
+        let (d, s) = (&model.deform, self.slot(k));
+        self.mlp.backward(
+            rec,
+            &s.mlp,
+            model.gaussians.n,
+            d.params.all(),
+            self.output_grad(k),
+            d.grads.all(),
+            accumulate,
+        );
+    }
+}
+
+fn drawn_of(b: &[Buffer; 3]) -> Drawn<'_> {
+    Drawn {
+        means: b[0].all(),
+        scales: b[1].all(),
+        quats: b[2].all(),
+    }
+}

@@ -1,0 +1,179 @@
+//! Optimiser and density control: Adam over the Gaussian sections and the MLP with the plan's
+//! learning rates, and 3DGS densification (statistics every step, clone/split/prune and
+//! opacity reset at their cadence).
+
+use super::render::RenderPass;
+use crate::error::Result;
+use crate::kernels::adam::{Adam, AdamBuffers, AdamGroup};
+use crate::kernels::densify::{Densifier, DensifyBuffers, DensifySettings, GaussianBuffers};
+use crate::model::gaussians::Section;
+use crate::model::optim::AdamHyper;
+use crate::model::state::{GaussianState, Model};
+use crate::train::config::DensifyConfig;
+use crate::train::plan::StepLr;
+use crate::vk::{BufSlice, Gpu, Recorder};
+
+pub struct AdamPass {
+    adam: Adam,
+}
+
+impl AdamPass {
+    pub fn new(gpu: &Gpu) -> Result<Self> {
+        Ok(AdamPass {
+            adam: Adam::new(gpu)?,
+        })
+    }
+
+    /// One Adam step of iteration `it` for every Gaussian section (and the MLP while it
+    /// trains), skipped on the GPU when `skip` (a render's overflow flag) is set.
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        model: &Model,
+        lr: &StepLr,
+        it: u32,
+        skip: BufSlice<'_>,
+    ) {
+        let g = &model.gaussians;
+        let l = &g.layout;
+        let group = |s: Section, lr: f64| AdamGroup {
+            first: l.offset(s) as u32,
+            count: g.n * l.row_len(s),
+            lr: lr as f32,
+            mask: None,
+        };
+        let mut groups = vec![
+            group(Section::Means, lr.means),
+            group(Section::LogScales, lr.log_scales),
+            group(Section::Quats, lr.quats),
+            group(Section::Opacity, lr.opacity),
+            group(Section::ShDc, lr.sh_dc),
+        ];
+        if l.sh_coeffs > 1 {
+            groups.push(group(Section::ShRest, lr.sh_rest));
+        }
+        groups.retain(|g| g.count > 0);
+        let skip = skip.buf.slice(skip.offset, 4);
+        let bufs = AdamBuffers {
+            params: g.params.all(),
+            grads: g.grads.all(),
+            m: g.m.all(),
+            v: g.v.all(),
+        };
+        let h = AdamHyper::default();
+        self.adam.record_guarded(rec, bufs, &groups, &h, it, skip);
+        if let Some((lr, step)) = lr.deform {
+            let d = &model.deform;
+            let groups = [AdamGroup {
+                first: 0,
+                count: d.layout.total as u32,
+                lr: lr as f32,
+                mask: None,
+            }];
+            let bufs = AdamBuffers {
+                params: d.params.all(),
+                grads: d.grads.all(),
+                m: d.m.all(),
+                v: d.v.all(),
+            };
+            self.adam.record_guarded(rec, bufs, &groups, &h, step, skip);
+        }
+    }
+}
+
+/// 3DGS density control over the model's Gaussians.
+pub struct DensifyPass {
+    densifier: Densifier,
+    pub bufs: DensifyBuffers,
+    cfg: DensifyConfig,
+    extent: f32,
+    seed: u32,
+}
+
+impl DensifyPass {
+    pub fn new(gpu: &Gpu, cfg: DensifyConfig, extent: f32, seed: u64) -> Result<Self> {
+        let densifier = Densifier::new(gpu)?;
+        Ok(DensifyPass {
+            bufs: densifier.buffers(gpu, cfg.budget)?,
+            densifier,
+            cfg,
+            extent,
+            seed: seed as u32,
+        })
+    }
+
+    /// Accumulates the view-space gradient statistics of `render`'s last backward. (An
+    /// overflowed, discarded step adds its statistics once more; densification reads
+    /// averages, so one repeated view among hundreds is harmless.)
+    pub fn record_stats(&self, rec: &mut Recorder<'_>, render: &RenderPass, n: u32) {
+        self.densifier
+            .record_stats(rec, &self.bufs, &render.bufs, n);
+    }
+
+    /// Clone/split/prune into the next generation and make it current (reads the new count
+    /// back: this runs every hundred steps, between steps). `screen_cut`: prune by screen size.
+    pub fn densify(
+        &self,
+        gpu: &Gpu,
+        g: &mut GaussianState,
+        it: u32,
+        screen_cut: bool,
+    ) -> Result<()> {
+        let d = &self.cfg;
+        let mut s = DensifySettings::new(self.extent, d.budget);
+        s.grad_threshold = d.grad_threshold;
+        s.percent_dense = d.percent_dense;
+        s.min_opacity = d.min_opacity;
+        s.max_screen_size = if screen_cut { d.max_screen_size } else { 0.0 };
+        s.seed = self.seed;
+        s.iteration = it;
+        let mut rec = Recorder::new(gpu)?;
+        let src = GaussianBuffers {
+            layout: &g.layout,
+            params: &g.params,
+            m: &g.m,
+            v: &g.v,
+        };
+        let dst = GaussianBuffers {
+            layout: &g.layout,
+            params: &g.next[0],
+            m: &g.next[1],
+            v: &g.next[2],
+        };
+        self.densifier
+            .record_densify(&mut rec, &self.bufs, src, dst, g.n, &s)?;
+        rec.finish()?;
+        let n = self.bufs.read_count(gpu)?;
+        g.swap_generation(n);
+        Ok(())
+    }
+
+    /// 3DGS's periodic opacity reset (moments of the opacity section cleared).
+    pub fn reset_opacity(&self, gpu: &Gpu, g: &GaussianState) -> Result<()> {
+        let mut rec = Recorder::new(gpu)?;
+        let b = GaussianBuffers {
+            layout: &g.layout,
+            params: &g.params,
+            m: &g.m,
+            v: &g.v,
+        };
+        self.densifier.record_opacity_reset(&mut rec, b, g.n);
+        rec.finish()?;
+        Ok(())
+    }
+
+    /// The statistics (gradient accumulator, count, max radius) of rows `0..n`, for checkpoints.
+    pub fn stats(&self, gpu: &Gpu, n: u32) -> Result<[Vec<f32>; 3]> {
+        let b = &self.bufs;
+        let rd = |x: &crate::vk::Buffer| gpu.read::<f32>(x.elems::<f32>(0, n as u64));
+        Ok([rd(&b.grad_accum)?, rd(&b.denom)?, rd(&b.max_radii)?])
+    }
+
+    pub fn restore_stats(&self, gpu: &Gpu, stats: &[Vec<f32>; 3]) -> Result<()> {
+        let b = &self.bufs;
+        for (buf, v) in [&b.grad_accum, &b.denom, &b.max_radii].iter().zip(stats) {
+            gpu.upload(buf.all(), v)?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,391 @@
+//! What one training iteration does, decided on the CPU before anything is recorded: the
+//! frame and its pair, the times (with time noise), background, SH degree, motion weight α_t,
+//! the learning rates and whether densification is due. Pure: no GPU, unit-tested.
+//!
+//! Every choice is hashed from (seed, iteration), never drawn from a running generator, so a
+//! resumed run makes exactly the choices of an uninterrupted one.
+
+use super::config::{Background, MotionOrder, TimeNoise, TrainConfig};
+use crate::model::optim::ExpLr;
+
+/// Facts about the training frames the schedule needs: their times, time order, camera extent.
+#[derive(Clone, Debug)]
+pub struct FrameTimes {
+    pub times: Vec<f32>,
+    /// Frame indices sorted by time (ties by index) and each frame's rank in that order.
+    by_time: Vec<usize>,
+    rank: Vec<usize>,
+    /// 1 / distinct times: the scale of Deformable-3DGS's time noise.
+    time_interval: f32,
+    time_noise: bool,
+    /// 3DGS's camera extent (scales the position learning rate).
+    pub extent: f32,
+}
+
+impl FrameTimes {
+    /// `synthetic`: a D-NeRF/blender scene (time noise `auto` is off there).
+    pub fn new(times: Vec<f32>, noise: TimeNoise, synthetic: bool, extent: f32) -> Self {
+        let mut by_time: Vec<usize> = (0..times.len()).collect();
+        by_time.sort_by(|&a, &b| times[a].total_cmp(&times[b]).then(a.cmp(&b)));
+        let mut rank = vec![0; times.len()];
+        for (r, &i) in by_time.iter().enumerate() {
+            rank[i] = r;
+        }
+        let mut distinct: Vec<u32> = times.iter().map(|t| t.to_bits()).collect();
+        distinct.sort_unstable();
+        distinct.dedup();
+        FrameTimes {
+            time_interval: 1.0 / distinct.len().max(1) as f32,
+            time_noise: match noise {
+                TimeNoise::Auto => !synthetic,
+                TimeNoise::On => true,
+                TimeNoise::Off => false,
+            },
+            times,
+            by_time,
+            rank,
+            extent,
+        }
+    }
+
+    /// The temporal neighbour of frame `fi`: `gap` frames later in time (earlier at the end).
+    pub fn pair(&self, fi: usize, gap: u32) -> usize {
+        let (r, n, gap) = (self.rank[fi], self.by_time.len(), gap.max(1) as usize);
+        let j = if r + gap < n {
+            r + gap
+        } else {
+            r.saturating_sub(gap)
+        };
+        self.by_time[j]
+    }
+}
+
+/// Which render of a DispFlow step plays which part. Decided once from the order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Decomposition {
+    /// The photometric render (v1, t1) splats δ (direct); else the intermediate does.
+    pub photo_splats: bool,
+    /// The intermediate render's view is the pair's (v2, reverse) instead of the frame's (v1).
+    pub inter_at_pair_view: bool,
+    /// The intermediate render draws the Gaussians at t2 (direct) instead of t1.
+    pub inter_at_t2: bool,
+    /// Scene motion = flow(photo a → intermediate) (direct) or flow(intermediate → photo b).
+    pub flow_from_photo: bool,
+}
+
+impl Decomposition {
+    pub fn of(order: MotionOrder) -> Self {
+        let direct = order == MotionOrder::Direct;
+        // Direct: (v1,t1) → (v1,t2) → (v2,t2): the intermediate (v1, t2) differs from the
+        // photo of a by scene motion only. Reverse: (v1,t1) → (v2,t1) → (v2,t2).
+        Decomposition {
+            photo_splats: direct,
+            inter_at_pair_view: !direct,
+            inter_at_t2: direct,
+            flow_from_photo: direct,
+        }
+    }
+}
+
+/// The motion term of one step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotionPlan {
+    /// The pair frame b = (v2, t2).
+    pub pair: usize,
+    pub t2: f32,
+    /// α_t.
+    pub weight: f32,
+    pub roles: Decomposition,
+}
+
+/// Learning rates of one step (f64 as computed; the optimiser takes f32).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepLr {
+    pub means: f64,
+    pub log_scales: f64,
+    pub quats: f64,
+    pub opacity: f64,
+    pub sh_dc: f64,
+    pub sh_rest: f64,
+    /// The MLP's rate and its own Adam step (counted from the end of the warm-up); `None`
+    /// while the deformation is off.
+    pub deform: Option<(f64, u32)>,
+}
+
+/// Everything iteration `iteration` (1-based) does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepPlan {
+    pub iteration: u32,
+    pub frame: usize,
+    /// The frame's time plus time noise (when on and the deformation is active).
+    pub t1: f32,
+    /// The deformation network runs (after the warm-up); else D ≡ 0.
+    pub deform_active: bool,
+    pub background: [f32; 3],
+    pub sh_degree: u32,
+    pub motion: Option<MotionPlan>,
+    pub lr: StepLr,
+    /// The step accumulates densification statistics.
+    pub densify_stats: bool,
+    /// Densification (clone/split/prune) runs after the step; with the screen-size cut-off
+    /// when the second member is set.
+    pub densify: Option<bool>,
+    /// Opacity reset after the step.
+    pub opacity_reset: bool,
+}
+
+impl StepPlan {
+    pub fn at(cfg: &TrainConfig, frames: &FrameTimes, iteration: u32) -> StepPlan {
+        let it = iteration.max(1);
+        let frame = frame_for_iteration(cfg.seed, it, frames.times.len());
+        let deform_active = it > cfg.warm_up;
+        let mut t1 = frames.times[frame];
+        if frames.time_noise && deform_active {
+            // Deformable-3DGS AST: N(0,1) · (1 / frames) · a decaying factor.
+            let (u1, u2) = (
+                hash_uniform(cfg.seed, it as u64, 1),
+                hash_uniform(cfg.seed, it as u64, 2),
+            );
+            let z = (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos();
+            let decay = ExpLr {
+                lr_init: 0.1,
+                lr_final: 1e-15,
+                lr_delay_steps: 0,
+                lr_delay_mult: 0.01,
+                max_steps: 20_000,
+            };
+            t1 += (z * frames.time_interval as f64 * decay.at(it as i64)) as f32;
+        }
+        let background = match cfg.background {
+            Background::Black => [0.0; 3],
+            Background::White => [1.0; 3],
+            Background::Random => {
+                [1, 2, 3].map(|k| hash_uniform(cfg.seed ^ 0xb9, it as u64, k) as f32)
+            }
+        };
+        let weight = motion_weight_at(cfg, it);
+        let motion = (weight > 0.0).then(|| {
+            let pair = frames.pair(frame, cfg.pair_gap);
+            MotionPlan {
+                pair,
+                t2: frames.times[pair],
+                weight,
+                roles: Decomposition::of(cfg.motion_order),
+            }
+        });
+        let d = &cfg.densify;
+        StepPlan {
+            iteration: it,
+            frame,
+            t1,
+            deform_active,
+            background,
+            sh_degree: cfg.sh_degree.min((it - 1) / cfg.sh_interval),
+            motion,
+            lr: learning_rates(cfg, frames.extent, it),
+            densify_stats: it <= d.until,
+            densify: (it <= d.until && it > d.from && it % d.interval == 0)
+                .then_some(it > d.opacity_reset_interval),
+            opacity_reset: it <= d.until && it % d.opacity_reset_interval == 0,
+        }
+    }
+}
+
+/// α_t of the motion term at 1-based `iteration`: 0 before `motion_start` (or during the
+/// warm-up), then linear from 0.1·α to α over the remaining iterations.
+pub fn motion_weight_at(cfg: &TrainConfig, iteration: u32) -> f32 {
+    let (a, t0, end) = (cfg.motion_weight, cfg.motion_start, cfg.iterations);
+    if a <= 0.0 || iteration < t0 || iteration <= cfg.warm_up {
+        return 0.0;
+    }
+    let f = if end > t0 {
+        (iteration - t0) as f32 / (end - t0) as f32
+    } else {
+        1.0
+    };
+    a * (0.1 + 0.9 * f.clamp(0.0, 1.0))
+}
+
+fn learning_rates(cfg: &TrainConfig, extent: f32, it: u32) -> StepLr {
+    let lr = &cfg.lr;
+    let pos = ExpLr {
+        lr_init: lr.position_init * extent as f64,
+        lr_final: lr.position_final * extent as f64,
+        lr_delay_steps: 0,
+        lr_delay_mult: lr.position_delay_mult,
+        max_steps: cfg.iterations,
+    };
+    let deform = ExpLr {
+        lr_init: lr.deform_init,
+        lr_final: lr.deform_final,
+        lr_delay_steps: 0,
+        lr_delay_mult: lr.position_delay_mult,
+        max_steps: cfg.iterations,
+    };
+    StepLr {
+        means: pos.at(it as i64),
+        log_scales: lr.scaling,
+        quats: lr.rotation,
+        opacity: lr.opacity,
+        sh_dc: lr.feature,
+        sh_rest: lr.feature / lr.feature_rest_div,
+        deform: (it > cfg.warm_up).then(|| (deform.at(it as i64), it - cfg.warm_up)),
+    }
+}
+
+/// SplitMix-style hash → uniform in (0, 1), for per-iteration choices that must not depend on
+/// how many random numbers were drawn before (so a resumed run makes the same choices).
+pub fn hash_uniform(seed: u64, a: u64, b: u64) -> f64 {
+    let mut z =
+        seed ^ a.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ b.wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+}
+
+/// Training frame of 1-based `iteration`: a fresh shuffle of all frames every epoch, as 3DGS
+/// draws cameras, but seeded by (seed, epoch) so it depends on the iteration alone.
+pub fn frame_for_iteration(seed: u64, iteration: u32, frames: usize) -> usize {
+    let i = (iteration as usize).saturating_sub(1);
+    let (epoch, k) = (i / frames, i % frames);
+    let mut perm: Vec<usize> = (0..frames).collect();
+    for j in (1..frames).rev() {
+        let r = (hash_uniform(seed, epoch as u64, j as u64) * (j + 1) as f64) as usize;
+        perm.swap(j, r.min(j));
+    }
+    perm[k]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg() -> TrainConfig {
+        let mut c = TrainConfig::fast();
+        c.iterations = 100;
+        c.warm_up = 20;
+        c.motion_weight = 0.5;
+        c.motion_start = 40;
+        c.sh_degree = 2;
+        c.sh_interval = 30;
+        c.densify.from = 10;
+        c.densify.until = 60;
+        c.densify.interval = 25;
+        c.densify.opacity_reset_interval = 50;
+        c
+    }
+
+    fn frames() -> FrameTimes {
+        // Deliberately not in time order; two frames share t = 0.5.
+        FrameTimes::new(vec![0.5, 0.0, 1.0, 0.25, 0.5], TimeNoise::Off, true, 2.0)
+    }
+
+    #[test]
+    fn every_epoch_visits_every_frame_once() {
+        for epoch in 0..4u32 {
+            let mut seen: Vec<usize> = (1..=7)
+                .map(|k| frame_for_iteration(9, epoch * 7 + k, 7))
+                .collect();
+            seen.sort_unstable();
+            assert_eq!(seen, (0..7).collect::<Vec<_>>(), "epoch {epoch}");
+        }
+        let a: Vec<usize> = (1..=7).map(|k| frame_for_iteration(9, k, 7)).collect();
+        let b: Vec<usize> = (8..=14).map(|k| frame_for_iteration(9, k, 7)).collect();
+        assert_ne!(a, b, "each epoch reshuffles");
+    }
+
+    #[test]
+    fn pairs_follow_time_order_with_a_gap() {
+        let f = frames();
+        // Time order: 1 (0.0), 3 (0.25), 0 (0.5), 4 (0.5), 2 (1.0).
+        assert_eq!(f.pair(1, 1), 3);
+        assert_eq!(f.pair(3, 2), 4);
+        assert_eq!(f.pair(2, 1), 4, "the last frame pairs backwards");
+        assert_eq!(f.pair(4, 3), 1, "past the end: gap frames earlier");
+        assert_eq!(f.pair(1, 0), 3, "a zero gap is read as 1");
+    }
+
+    #[test]
+    fn schedule_switches_at_the_configured_iterations() {
+        let (c, f) = (cfg(), frames());
+        let p = |it| StepPlan::at(&c, &f, it);
+        assert!(!p(20).deform_active && p(21).deform_active);
+        assert_eq!(p(20).lr.deform, None);
+        assert_eq!(
+            p(21).lr.deform.map(|d| d.1),
+            Some(1),
+            "MLP Adam counts from 1"
+        );
+        assert_eq!(
+            [p(1), p(30), p(31), p(61), p(100)].map(|s| s.sh_degree),
+            [0, 0, 1, 2, 2]
+        );
+        assert!(p(39).motion.is_none());
+        let m = p(40).motion.expect("motion from motion_start");
+        assert!((m.weight - 0.05).abs() < 1e-7, "ramp starts at 0.1·α");
+        assert!((p(100).motion.unwrap().weight - 0.5).abs() < 1e-7);
+        assert_eq!(m.t2, f.times[m.pair]);
+        assert_ne!(m.pair, p(40).frame);
+        assert!(p(60).densify_stats && !p(61).densify_stats);
+        assert_eq!(
+            (p(10).densify, p(25).densify, p(50).densify),
+            (None, Some(false), Some(false))
+        );
+        assert_eq!(p(75).densify, None, "no densification after `until`");
+        assert!(p(50).opacity_reset && !p(100).opacity_reset);
+        let mut c2 = c.clone();
+        c2.densify.opacity_reset_interval = 20;
+        assert_eq!(
+            StepPlan::at(&c2, &f, 25).densify,
+            Some(true),
+            "screen-size cut after a reset"
+        );
+    }
+
+    #[test]
+    fn no_motion_without_weight_or_deformation() {
+        let (mut c, f) = (cfg(), frames());
+        c.motion_weight = 0.0;
+        assert!((1..=100).all(|it| StepPlan::at(&c, &f, it).motion.is_none()));
+        let mut c = cfg();
+        c.motion_start = 5; // before the warm-up ends: still nothing until the MLP runs
+        assert_eq!(motion_weight_at(&c, 20), 0.0);
+        assert!(motion_weight_at(&c, 21) > 0.0);
+    }
+
+    #[test]
+    fn time_noise_only_when_asked_and_deterministic() {
+        let c = cfg();
+        let on = FrameTimes::new(vec![0.0, 0.5, 1.0], TimeNoise::Auto, false, 1.0);
+        let off = FrameTimes::new(vec![0.0, 0.5, 1.0], TimeNoise::Auto, true, 1.0);
+        let a = StepPlan::at(&c, &on, 30);
+        assert_ne!(a.t1, on.times[a.frame], "real captures get time noise");
+        assert_eq!(
+            a,
+            StepPlan::at(&c, &on, 30),
+            "a plan depends on the iteration alone"
+        );
+        let w = StepPlan::at(&c, &on, 10);
+        assert_eq!(w.t1, on.times[w.frame], "no noise during the warm-up");
+        let b = StepPlan::at(&c, &off, 30);
+        assert_eq!(b.t1, off.times[b.frame], "synthetic scenes: auto = off");
+    }
+
+    #[test]
+    fn decomposition_of_each_order() {
+        let d = Decomposition::of(MotionOrder::Direct);
+        assert!(d.photo_splats && d.inter_at_t2 && !d.inter_at_pair_view && d.flow_from_photo);
+        let r = Decomposition::of(MotionOrder::Reverse);
+        assert!(!r.photo_splats && !r.inter_at_t2 && r.inter_at_pair_view && !r.flow_from_photo);
+    }
+
+    #[test]
+    fn random_background_is_per_iteration() {
+        let (mut c, f) = (cfg(), frames());
+        c.background = Background::Random;
+        let (a, b) = (StepPlan::at(&c, &f, 3), StepPlan::at(&c, &f, 4));
+        assert_ne!(a.background, b.background);
+        assert!(a.background.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
+}
