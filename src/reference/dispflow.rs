@@ -1,7 +1,10 @@
-//! Twin of `glsl/dispflow/*`.
+//! Twin of `glsl/dispflow/*`. Generic over the float type: f32 is what the GPU stores (bit for
+//! bit), f64 is what the whole-step twin (`reference::step`) composes.
+
+use std::ops::Sub;
 
 /// δ_i = dx_i(t2) − dx_i(t1) from [N,10] MLP outputs.
-pub fn displacement(out_t1: &[f32], out_t2: &[f32]) -> Vec<f32> {
+pub fn displacement<T: Copy + Sub<Output = T>>(out_t1: &[T], out_t2: &[T]) -> Vec<T> {
     out_t1
         .chunks_exact(10)
         .zip(out_t2.chunks_exact(10))
@@ -10,12 +13,15 @@ pub fn displacement(out_t1: &[f32], out_t2: &[f32]) -> Vec<f32> {
 }
 
 /// (updated ∂L/∂out(t1), ∂L/∂out(t2)) from ∂L/∂δ.
-pub fn displacement_bwd(d_delta: &[f32], d_out_t1: &[f32]) -> (Vec<f32>, Vec<f32>) {
+pub fn displacement_bwd<T: Copy + Default + Sub<Output = T>>(
+    d_delta: &[T],
+    d_out_t1: &[T],
+) -> (Vec<T>, Vec<T>) {
     let mut d1 = d_out_t1.to_vec();
-    let mut d2 = vec![0.0; d_out_t1.len()];
+    let mut d2 = vec![T::default(); d_out_t1.len()];
     for (i, g) in d_delta.chunks_exact(3).enumerate() {
         for a in 0..3 {
-            d1[10 * i + a] -= g[a];
+            d1[10 * i + a] = d1[10 * i + a] - g[a];
             d2[10 * i + a] = g[a];
         }
     }
@@ -23,7 +29,12 @@ pub fn displacement_bwd(d_delta: &[f32], d_out_t1: &[f32]) -> (Vec<f32>, Vec<f32
 }
 
 /// (mean |m_scene − m_disp|, ∂(weight · mean)/∂m_disp); zeros when `skip` (degenerate map).
-pub fn motion_l1(m_disp: &[f32], m_scene: &[f32], weight: f64, skip: bool) -> (f64, Vec<f64>) {
+pub fn motion_l1<T: Copy + Into<f64>>(
+    m_disp: &[T],
+    m_scene: &[T],
+    weight: f64,
+    skip: bool,
+) -> (f64, Vec<f64>) {
     let n = m_disp.len().max(1) as f64;
     if skip {
         return (0.0, vec![0.0; m_disp.len()]);
@@ -33,7 +44,7 @@ pub fn motion_l1(m_disp: &[f32], m_scene: &[f32], weight: f64, skip: bool) -> (f
         .iter()
         .zip(m_scene)
         .map(|(&a, &b)| {
-            let e = a as f64 - b as f64;
+            let e = a.into() - b.into();
             sum += e.abs();
             weight
                 * if e > 0.0 {

@@ -206,8 +206,14 @@ fn linear_bwd(
 
 /// Gradient of `Σ_n Σ_j d_out[n][j] · out[n][j]` with respect to every parameter (the flat
 /// layout, padding zero), from the stored activations `a` of a forward pass. x and t are
-/// detached: nothing flows to them. `d_out` is `[N][10]` (dx, dr, ds gradients).
-pub fn backward(lay: &MlpLayout, params: &[f64], a: &Activations, d_out: &[f32]) -> Vec<f64> {
+/// detached: nothing flows to them. `d_out` is `[N][10]` (dx, dr, ds gradients), f32 as the GPU
+/// stores them or f64 (the whole-step twin).
+pub fn backward<T: Copy + Into<f64> + Sync>(
+    lay: &MlpLayout,
+    params: &[f64],
+    a: &Activations,
+    d_out: &[T],
+) -> Vec<f64> {
     let cfg = &lay.cfg;
     let (ind, w) = (cfg.in_dims(), cfg.width as usize);
     let ted = cfg.t_enc_dims();
@@ -219,7 +225,7 @@ pub fn backward(lay: &MlpLayout, params: &[f64], a: &Activations, d_out: &[f32])
         let x0 = row(&a.x0, ind);
         let dz: Vec<f64> = d_out[n * OUT_DIMS..(n + 1) * OUT_DIMS]
             .iter()
-            .map(|&v| v as f64)
+            .map(|&v| v.into())
             .collect();
         let mut dh = linear_bwd(lay.head(), params, &h[h.len() - 1], &dz, grad, true);
         let mut dx0 = vec![0.0; ind];

@@ -14,3 +14,4 @@ pub mod radix_sort;
 pub mod raster;
 pub mod scan;
 pub mod sh;
+pub mod step;

@@ -220,15 +220,16 @@ pub fn blend_bwd(
     )
 }
 
-/// [`blend_bwd`] on the f64 pipeline.
-pub fn blend_bwd_f64(
+/// [`blend_bwd`] on the f64 pipeline; the upstream gradients may be f32 (as the GPU holds them)
+/// or f64.
+pub fn blend_bwd_f64<T: Copy + Into<f64>>(
     p: &BlendParams,
     proj: &Projected64,
     features: &[f64],
-    d_rgb: &[[f32; 3]],
-    d_alpha: &[f32],
-    d_depth: &[f32],
-    d_features: &[f32],
+    d_rgb: &[[T; 3]],
+    d_alpha: &[T],
+    d_depth: &[T],
+    d_features: &[T],
 ) -> BlendGrads {
     check_inputs(p, proj, features.len());
     let n = proj.len();
@@ -245,7 +246,7 @@ pub fn blend_bwd_f64(
             "blend_bwd: {name}.len() = {len}, expected 0 or {want}"
         );
     }
-    let up = |v: &[f32], i: usize| v.get(i).map_or(0.0, |&x| x as f64);
+    let up = |v: &[T], i: usize| v.get(i).map_or(0.0, |&x| x.into());
     let bg = p.background.map(f64::from);
     let order = depth_order(proj);
     let mut g = BlendGrads {
@@ -262,7 +263,7 @@ pub fn blend_bwd_f64(
             let pix = (py * p.width + px) as usize;
             let (list, _, _) = walk_pixel(p, proj, &order, px, py, &mut sig);
             let drgb: [f64; 3] =
-                std::array::from_fn(|c| d_rgb.get(pix).map_or(0.0, |v| v[c] as f64));
+                std::array::from_fn(|c| d_rgb.get(pix).map_or(0.0, |v| v[c].into()));
             let dalpha = up(d_alpha, pix);
             let ddepth = up(d_depth, pix);
             // rgb += T_final·bg, alpha = 1 − T_final.

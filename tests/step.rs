@@ -1,0 +1,554 @@
+//! The whole-step CPU twin (`reference::step`, one DispFlow-GS step in direct order) against
+//! central finite differences of its own f64 loss, for parameters of every group (canonical
+//! means, log-scales, quaternions, opacity logits, SH DC and rest, MLP time net / trunk /
+//! head), and the detached-statistics variant against the full gradient.
+
+use dispflow_vk::model::deform::{MlpConfig, MlpLayout, TimeEncoding, OUT_DIMS};
+use dispflow_vk::model::gaussians::HostGaussians;
+use dispflow_vk::reference::raster::Camera;
+use dispflow_vk::reference::step::{
+    dispflow_step, step_loss_f64, NormGradMode, StepInputs, StepOutputs, StepParams64,
+};
+use dispflow_vk::testing::Noise;
+
+// ---------------------------------------------------------------------------------------------
+// Scene
+
+/// A deterministic small scene: Gaussians in front of a 24×20 camera (2×2 tiles, the right and
+/// bottom ones partial), a depth-2 width-16 MLP with the synthetic time net, a target image and a
+/// scene-motion field, both non-degenerate.
+struct Scene {
+    gaussians: HostGaussians,
+    sh_degree: u32,
+    layout: MlpLayout,
+    mlp_params: Vec<f32>,
+    camera: Camera,
+    target: Vec<[f32; 4]>,
+    scene_motion: Vec<[f32; 2]>,
+}
+
+const W: u32 = 24;
+const H: u32 = 20;
+const T1: f32 = 0.3;
+const T2: f32 = 0.55;
+
+fn unif(r: &mut Noise, lo: f64, hi: f64) -> f64 {
+    lo + (hi - lo) * ((r.next_u32() >> 8) as f64 / 16_777_216.0)
+}
+
+/// `rz · ry · rx` for small angles.
+fn rotation(a: [f64; 3]) -> [[f64; 3]; 3] {
+    let (sx, cx) = a[0].sin_cos();
+    let (sy, cy) = a[1].sin_cos();
+    let (sz, cz) = a[2].sin_cos();
+    let rx = [[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]];
+    let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
+    let rz = [[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]];
+    let mul = |a: [[f64; 3]; 3], b: [[f64; 3]; 3]| {
+        let mut c = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                for k in 0..3 {
+                    c[i][j] += a[i][k] * b[k][j];
+                }
+            }
+        }
+        c
+    };
+    mul(mul(rz, ry), rx)
+}
+
+/// The trainer's MLP for `mlp_depth = 2`, `mlp_width = 16` on a blender scene: synthetic time
+/// net with its hidden width following the trunk width, no skip (depth < 3).
+fn small_mlp() -> MlpConfig {
+    let base = MlpConfig::synthetic();
+    let time = match base.time {
+        TimeEncoding::TimeNet { freqs, out, .. } => TimeEncoding::TimeNet {
+            freqs,
+            hidden: 16,
+            out,
+        },
+        t => t,
+    };
+    MlpConfig {
+        depth: 2,
+        width: 16,
+        skip: None,
+        x_freqs: base.x_freqs,
+        time,
+    }
+}
+
+fn scene(seed: u64, n: usize) -> Scene {
+    let mut r = Noise::new(seed);
+    // Camera: mildly rotated, off-centre principal point, centre at (0.1, −0.1, −4).
+    let rot = rotation([0.08, -0.06, 0.05]);
+    let centre = [0.1, -0.1, -4.0];
+    let trans: [f32; 3] =
+        std::array::from_fn(|i| -(0..3).map(|j| rot[i][j] * centre[j]).sum::<f64>() as f32);
+    let rot32 = rot.map(|row| row.map(|v| v as f32));
+    let (fx, fy) = (22.0f32, 21.0f32);
+    let camera = Camera {
+        rot: rot32,
+        trans,
+        fx,
+        fy,
+        cx: 11.3,
+        cy: 10.6,
+        width: W,
+        height: H,
+        near: 0.01,
+    };
+    let world = |pc: [f64; 3]| -> [f32; 3] {
+        std::array::from_fn(|j| {
+            (0..3)
+                .map(|i| rot32[i][j] as f64 * (pc[i] - trans[i] as f64))
+                .sum::<f64>() as f32
+        })
+    };
+
+    let sh_degree = 1;
+    let sh_coeffs = 4u32;
+    let mut g = HostGaussians {
+        sh_coeffs,
+        ..Default::default()
+    };
+    for _ in 0..n {
+        // Inside the view (±45 % of the half-extent), 3–5 units deep.
+        let z = unif(&mut r, 3.0, 5.0);
+        let xz = unif(&mut r, -0.45, 0.45) * W as f64 / fx as f64;
+        let yz = unif(&mut r, -0.45, 0.45) * H as f64 / fy as f64;
+        g.means.push(world([xz * z, yz * z, z]));
+        g.log_scales
+            .push(std::array::from_fn(|_| unif(&mut r, 0.12, 0.4).ln() as f32));
+        let q: [f32; 4] = loop {
+            let q = std::array::from_fn(|_| unif(&mut r, -1.0, 1.0) as f32);
+            if q.iter().map(|v| v * v).sum::<f32>() > 0.2 {
+                break q;
+            }
+        };
+        g.quats.push(q);
+        g.opacity.push(unif(&mut r, -1.0, 2.0) as f32);
+        g.sh_dc
+            .push(std::array::from_fn(|_| unif(&mut r, -0.8, 0.8) as f32));
+        for _ in 0..3 * (sh_coeffs - 1) {
+            g.sh_rest.push(unif(&mut r, -0.3, 0.3) as f32);
+        }
+    }
+
+    // PyTorch-style init (the trainer's zero-initialised head would make δ ≡ 0), reshaped so the
+    // displacement is visible but moderate: with 16 hidden units the time features barely move
+    // the output, so trunk layer 0's weights on the time features are ×10; the head's dr and ds
+    // rows ×0.3 keep the drawn rotations and scales near the canonical ones. Result: max |dx|
+    // ≈ 0.5 (≈ 3 px), δ between t1 and t2 ≈ 0.15 (≈ 1 px), every Gaussian still in view.
+    let layout = MlpLayout::new(&small_mlp()).unwrap();
+    let mut mlp_params = layout.init_params(seed + 100);
+    let trunk0 = layout.trunk()[0];
+    let x_dims = layout.cfg.x_dims();
+    for o in 0..trunk0.fan_out {
+        let row = trunk0.w_off + o * trunk0.fan_in;
+        for v in &mut mlp_params[row + x_dims..row + trunk0.fan_in] {
+            *v *= 10.0;
+        }
+    }
+    let head = layout.head();
+    for o in 3..OUT_DIMS {
+        for v in &mut mlp_params[head.w_off + o * head.fan_in..head.w_off + (o + 1) * head.fan_in] {
+            *v *= 0.3;
+        }
+        mlp_params[head.b_off + o] *= 0.3;
+    }
+
+    // Target: smooth colour waves plus a little noise; scene motion: a smooth field with a
+    // rotating part, so its magnitude varies across the image.
+    let (mut target, mut scene_motion) = (Vec::new(), Vec::new());
+    for py in 0..H {
+        for px in 0..W {
+            let (x, y) = (px as f64, py as f64);
+            let mut u = || unif(&mut r, -0.05, 0.05);
+            target.push([
+                (0.5 + 0.3 * (0.4 * x + 0.2 * y).sin() + u()) as f32,
+                (0.45 + 0.3 * (0.3 * y - 0.1 * x).cos() + u()) as f32,
+                (0.4 + 0.25 * (0.25 * (x + y)).sin() + u()) as f32,
+                1.0,
+            ]);
+            let (dx, dy) = (x - 14.0, y - 8.0);
+            scene_motion.push([
+                (0.3 + 0.08 * dy + 0.2 * (0.3 * x).sin()) as f32,
+                (-0.1 - 0.06 * dx + 0.15 * (0.4 * y).cos()) as f32,
+            ]);
+        }
+    }
+    Scene {
+        gaussians: g,
+        sh_degree,
+        layout,
+        mlp_params,
+        camera,
+        target,
+        scene_motion,
+    }
+}
+
+impl Scene {
+    fn inputs(&self, motion_weight: f32, norm_grad: NormGradMode) -> StepInputs<'_> {
+        StepInputs {
+            gaussians: &self.gaussians,
+            sh_degree: self.sh_degree,
+            mlp: &self.layout,
+            mlp_params: &self.mlp_params,
+            camera: &self.camera,
+            t1: T1,
+            t2: T2,
+            target: &self.target,
+            scene_motion: &self.scene_motion,
+            background: [0.1, 0.2, 0.3],
+            alpha_max: 0.99,
+            lambda_ssim: 0.2,
+            motion_weight,
+            norm_grad,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Parameters
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Group {
+    Means,
+    LogScales,
+    Quats,
+    Opacity,
+    ShDc,
+    ShRest,
+    /// MLP parameters of one Linear (index into `layout.linears`).
+    Mlp(usize),
+}
+
+/// One scalar parameter: its group and flat index within the group's array (Gaussian arrays
+/// flattened row-major; MLP: index into the flat parameter buffer).
+#[derive(Clone, Copy, Debug)]
+struct Param(Group, usize);
+
+fn slot(p: &mut StepParams64, Param(g, j): Param) -> &mut f64 {
+    let c = &mut p.gaussians;
+    match g {
+        Group::Means => &mut c.means[j / 3][j % 3],
+        Group::LogScales => &mut c.log_scales[j / 3][j % 3],
+        Group::Quats => &mut c.quats[j / 4][j % 4],
+        Group::Opacity => &mut c.opacity[j],
+        Group::ShDc => &mut c.sh_dc[j / 3][j % 3],
+        Group::ShRest => &mut c.sh_rest[j],
+        Group::Mlp(_) => &mut p.mlp[j],
+    }
+}
+
+fn analytic(o: &StepOutputs, Param(g, j): Param) -> f64 {
+    let d = &o.d_gaussians;
+    match g {
+        Group::Means => d.means[j / 3][j % 3],
+        Group::LogScales => d.log_scales[j / 3][j % 3],
+        Group::Quats => d.quats[j / 4][j % 4],
+        Group::Opacity => d.opacity[j],
+        Group::ShDc => d.sh_dc[j / 3][j % 3],
+        Group::ShRest => d.sh_rest[j],
+        Group::Mlp(_) => o.d_mlp[j],
+    }
+}
+
+/// Every parameter of Gaussians `ids`, and 4 weights + 2 biases of every Linear of the MLP (time
+/// net layers 0 and 1, trunk layers 0 and 1, head), drawn by a fixed seed.
+fn params_to_check(s: &Scene, ids: &[usize]) -> Vec<Param> {
+    let rest = 3 * (s.gaussians.sh_coeffs as usize - 1);
+    let mut v = Vec::new();
+    for &i in ids {
+        v.extend((0..3).map(|a| Param(Group::Means, 3 * i + a)));
+        v.extend((0..3).map(|a| Param(Group::LogScales, 3 * i + a)));
+        v.extend((0..4).map(|a| Param(Group::Quats, 4 * i + a)));
+        v.push(Param(Group::Opacity, i));
+        v.extend((0..3).map(|a| Param(Group::ShDc, 3 * i + a)));
+        v.extend((0..rest).map(|a| Param(Group::ShRest, rest * i + a)));
+    }
+    let mut r = Noise::new(77);
+    for (k, l) in s.layout.linears.iter().enumerate() {
+        for _ in 0..4 {
+            let j = l.w_off + r.next_u32() as usize % (l.fan_in * l.fan_out);
+            v.push(Param(Group::Mlp(k), j));
+        }
+        for _ in 0..2 {
+            v.push(Param(
+                Group::Mlp(k),
+                l.b_off + r.next_u32() as usize % l.fan_out,
+            ));
+        }
+    }
+    v
+}
+
+fn group_name(s: &Scene, g: Group) -> String {
+    match g {
+        Group::Mlp(k) => format!("mlp {:?}", s.layout.linears[k].role),
+        g => format!("{g:?}"),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tests
+
+/// Central differences of the total loss (photo + motion) wrt parameters of every group against
+/// the step's gradients, with the autograd (Full) normalisation gradient: the Detached variant
+/// holds min and max constant in the backward by design, so it is not the derivative of the loss
+/// and cannot be checked this way (see `twin_step_detached_differs_only_through_stats`).
+///
+/// Step h = 1e-6 (absolute; parameters are O(0.1–1)): in f64 the rounding error of the
+/// difference quotient is ~1e-16·|L|·(terms)/h ≲ 1e-9 and the truncation error h²·|L'''|/6 ≲
+/// 1e-10 on a smooth piece; observed |analytic − fd| ≤ 4e-10. The tolerance
+/// |analytic − fd| ≤ 1e-6·|fd| + 1e-8 leaves a factor ≥ 25 over that, while a real mistake (a
+/// flipped sign, a dropped term, a missing factor) is at least a few per cent of the checked
+/// gradients, whose per-group maxima are 2e-3–6e-2 here: e.g. negating ∂L/∂δ or dropping the t2
+/// MLP backward fails on the first time-net weight checked.
+/// A parameter whose ±h evaluation changes a discrete decision (ReLU mask, culling, tile rect,
+/// α clamp, 1/255 cut, T stop, depth order, sign of an L1 residual, argmin/argmax of m_disp —
+/// the loss signature) straddles a kink where FD means nothing: it is skipped and counted.
+#[test]
+fn twin_step_matches_finite_differences() {
+    let s = scene(5, 40);
+    let inp = s.inputs(0.5, NormGradMode::Full);
+    let out = dispflow_step(&inp);
+    assert!(!out.motion_skipped, "motion term skipped");
+    assert!(out.motion_loss > 1e-3, "motion loss {}", out.motion_loss);
+    let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let max_delta = out.delta.iter().map(|&d| norm(d)).fold(0.0, f64::max);
+    let max_dx = (out.drawn_means.iter().zip(&s.gaussians.means))
+        .map(|(d, m)| norm(std::array::from_fn(|a| d[a] - m[a] as f64)))
+        .fold(0.0, f64::max);
+    eprintln!(
+        "photo {:.4}, motion {:.4}, max |δ| {max_delta:.3}, max |dx| {max_dx:.3} (1 px ≈ 0.18 at z = 4)",
+        out.photo_loss, out.motion_loss
+    );
+
+    let p0 = StepParams64::from_inputs(&inp);
+    let view = out.drawn_means.clone();
+    let base = step_loss_f64(&inp, &p0, Some(&view));
+    assert!(
+        (base.total() - out.total_loss()).abs() <= 1e-14,
+        "step_loss_f64 {} vs dispflow_step {}",
+        base.total(),
+        out.total_loss()
+    );
+
+    // The motion term really carries the MLP gradient checked below (so the test sees a
+    // mistake in δ's backward or in the t2 pass): its share of each checked Linear is large.
+    let photo_only = dispflow_step(&s.inputs(0.0, NormGradMode::Full));
+    let ids = [0, 9, 17, 26, 35];
+    let params = params_to_check(&s, &ids);
+    for &i in &ids {
+        assert!(
+            out.d_gaussians.opacity[i].abs() > 1e-5,
+            "Gaussian {i} unseen"
+        );
+    }
+
+    let h = 1e-6;
+    // Per group: max relative error (|fd| floored at 1e-6), checked, skipped, max absolute error.
+    let mut worst: Vec<(Group, f64, usize, usize, f64)> = Vec::new();
+    let (mut total, mut skipped) = (0usize, 0usize);
+    for &p in &params {
+        let eval = |d: f64| {
+            let mut q = p0.clone();
+            *slot(&mut q, p) += d;
+            step_loss_f64(&inp, &q, Some(&view))
+        };
+        let (lp, lm) = (eval(h), eval(-h));
+        total += 1;
+        let k = match worst.iter().position(|w| w.0 == p.0) {
+            Some(k) => k,
+            None => {
+                worst.push((p.0, 0.0, 0, 0, 0.0));
+                worst.len() - 1
+            }
+        };
+        if lp.signature != base.signature || lm.signature != base.signature {
+            skipped += 1;
+            worst[k].3 += 1;
+            continue;
+        }
+        let fd = (lp.total() - lm.total()) / (2.0 * h);
+        let an = analytic(&out, p);
+        assert!(
+            (an - fd).abs() <= 1e-6 * fd.abs() + 1e-8,
+            "{} [{}]: analytic {an:e}, finite difference {fd:e}",
+            group_name(&s, p.0),
+            p.1
+        );
+        worst[k].1 = worst[k].1.max((an - fd).abs() / fd.abs().max(1e-6));
+        worst[k].4 = worst[k].4.max((an - fd).abs());
+        worst[k].2 += 1;
+    }
+    for &(g, err, checked, skip, abs_err) in &worst {
+        let gmax = params
+            .iter()
+            .filter(|p| p.0 == g)
+            .map(|&p| analytic(&out, p).abs())
+            .fold(0.0, f64::max);
+        eprintln!(
+            "{:>16}: {checked} checked, {skip} skipped, max |grad| {gmax:.2e}, max rel err {err:.2e}, max abs err {abs_err:.2e}",
+            group_name(&s, g)
+        );
+        assert!(
+            checked >= 3,
+            "{}: only {checked} checked",
+            group_name(&s, g)
+        );
+        assert!(gmax > 1e-4, "{}: vacuous gradient", group_name(&s, g));
+        if let Group::Mlp(_) = g {
+            let motion_part = params
+                .iter()
+                .filter(|p| p.0 == g)
+                .map(|&p| (analytic(&out, p) - analytic(&photo_only, p)).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                motion_part > 0.05 * gmax,
+                "{}: motion term's share of the gradient too small ({motion_part:e})",
+                group_name(&s, g)
+            );
+        }
+    }
+    eprintln!("{total} parameters, {skipped} skipped as straddling a kink");
+    // The straddle detection is live: shifting every Gaussian by ~0.3 px (the dx bias) crosses
+    // some kink.
+    let mut q = p0.clone();
+    q.mlp[s.layout.head().b_off] += 0.05;
+    assert_ne!(
+        step_loss_f64(&inp, &q, Some(&view)).signature,
+        base.signature
+    );
+    assert!(
+        skipped * 10 <= total,
+        "{skipped} of {total} straddle a kink"
+    );
+}
+
+fn flat_grads(o: &StepOutputs) -> Vec<f64> {
+    let d = &o.d_gaussians;
+    d.means
+        .iter()
+        .flatten()
+        .chain(d.log_scales.iter().flatten())
+        .chain(d.quats.iter().flatten())
+        .chain(&d.opacity)
+        .chain(d.sh_dc.iter().flatten())
+        .chain(&d.sh_rest)
+        .chain(&o.d_mlp)
+        .copied()
+        .collect()
+}
+
+fn max_abs(v: impl IntoIterator<Item = f64>) -> f64 {
+    v.into_iter().fold(0.0, |m, x| m.max(x.abs()))
+}
+
+/// Equal up to summation order: the MLP twin reduces its per-Gaussian gradients with rayon, so
+/// two runs of the same step may differ in the last bits.
+fn assert_same(what: &str, a: &[f64], b: &[f64]) {
+    assert_eq!(a.len(), b.len());
+    let scale = max_abs(a.iter().copied());
+    let (i, d) = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .enumerate()
+        .fold((0, 0.0), |m, (i, d)| if d > m.1 { (i, d) } else { m });
+    assert!(
+        d <= 1e-13 * scale,
+        "{what}: [{i}] {} vs {} (max |grad| {scale:e})",
+        a[i],
+        b[i]
+    );
+}
+
+/// Detached and Full differ only through the min/max statistics: identical with α = 0 (the
+/// photometric gradient alone), and with α > 0 identical losses and a feature gradient ∂L/∂F_disp
+/// that differs only at the argmin/argmax pixels of m_disp. The motion gradient is linear in α
+/// and reaches the Gaussians and the MLP; a degenerate scene-motion map skips it entirely.
+#[test]
+fn twin_step_detached_differs_only_through_stats() {
+    let s = scene(5, 40);
+    let run = |a: f32, m: NormGradMode| dispflow_step(&s.inputs(a, m));
+
+    let (d0, f0) = (
+        run(0.0, NormGradMode::Detached),
+        run(0.0, NormGradMode::Full),
+    );
+    assert_eq!(d0.motion_loss, 0.0);
+    assert_eq!(d0.photo_loss, f0.photo_loss);
+    assert_same(
+        "α = 0: Detached vs Full",
+        &flat_grads(&d0),
+        &flat_grads(&f0),
+    );
+    assert!(d0.d_delta.iter().flatten().all(|&v| v == 0.0));
+
+    let a = 0.1;
+    let (d1, f1) = (run(a, NormGradMode::Detached), run(a, NormGradMode::Full));
+    assert!(!d1.motion_skipped && d1.motion_loss > 0.0);
+    assert_eq!(
+        (d1.photo_loss, d1.motion_loss),
+        (f1.photo_loss, f1.motion_loss)
+    );
+    assert_eq!(d1.photo_loss, d0.photo_loss);
+    // ∂L/∂F_disp: Full − Detached is the statistics' term, on the argmin and argmax pixels.
+    let first = |v: f64| d1.m_hat_disp.iter().position(|&m| m == v).unwrap();
+    let (argmin, argmax) = (first(0.0), first(1.0));
+    let mut diff_pixels = Vec::new();
+    for (p, (x, y)) in d1
+        .d_disp_flow
+        .chunks_exact(3)
+        .zip(f1.d_disp_flow.chunks_exact(3))
+        .enumerate()
+    {
+        if x != y {
+            diff_pixels.push(p);
+        }
+    }
+    assert!(
+        !diff_pixels.is_empty() && diff_pixels.iter().all(|&p| p == argmin || p == argmax),
+        "Detached vs Full differ at pixels {diff_pixels:?} (argmin {argmin}, argmax {argmax})"
+    );
+    let gap = max_abs(
+        flat_grads(&d1)
+            .iter()
+            .zip(&flat_grads(&f1))
+            .map(|(x, y)| x - y),
+    );
+    assert!(
+        gap > 1e-6,
+        "α > 0: Detached and Full gradients agree ({gap:e})"
+    );
+
+    // The motion term's gradient: non-zero on Gaussians and MLP, linear in α.
+    let (g0, g1) = (flat_grads(&d0), flat_grads(&d1));
+    let g2 = flat_grads(&run(2.0 * a, NormGradMode::Detached));
+    let m1: Vec<f64> = g1.iter().zip(&g0).map(|(x, y)| x - y).collect();
+    let m2: Vec<f64> = g2.iter().zip(&g0).map(|(x, y)| x - y).collect();
+    let n_g = g0.len() - d0.d_mlp.len();
+    assert!(max_abs(m1[..n_g].iter().copied()) > 1e-4 * max_abs(g0[..n_g].iter().copied()));
+    assert!(max_abs(m1[n_g..].iter().copied()) > 1e-2 * max_abs(g0[n_g..].iter().copied()));
+    assert!(max_abs(d1.d_delta.iter().flatten().copied()) > 0.0);
+    let lin = max_abs(m2.iter().zip(&m1).map(|(x, y)| x - 2.0 * y));
+    assert!(
+        lin <= 1e-9 * max_abs(m2.iter().copied()),
+        "motion gradient not linear in α: {lin:e}"
+    );
+
+    // A flat scene motion is degenerate: no loss, no gradient (the α = 0 step exactly).
+    let flat = vec![[0.25f32, -0.5]; s.scene_motion.len()];
+    let skip = dispflow_step(&StepInputs {
+        scene_motion: &flat,
+        ..s.inputs(a, NormGradMode::Full)
+    });
+    assert!(skip.motion_skipped);
+    assert_eq!(skip.motion_loss, 0.0);
+    assert_same("skipped vs α = 0", &flat_grads(&skip), &g0);
+}
