@@ -4,7 +4,8 @@
 //! split samples) is hashed from (seed, iteration), Adam's step count is the iteration, and
 //! the checkpoint holds parameters, moments and densification statistics. The one source of
 //! run-to-run variation on lavapipe is the order of float atomic additions in blend_bwd across
-//! its worker threads, so this binary (one test) runs lavapipe with LP_NUM_THREADS=1.
+//! its worker threads, so this binary runs lavapipe with LP_NUM_THREADS=1. The same
+//! bit-exactness shows that evaluating in the middle of a run changes nothing of training.
 
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::Checkpoint;
@@ -56,4 +57,41 @@ fn resume_reproduces_an_uninterrupted_run() {
         resumed == straight,
         "resumed parameters, moments or statistics differ from the uninterrupted run"
     );
+}
+
+#[test]
+fn evaluating_mid_run_does_not_change_training() {
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let mut cfg = tiny_config(60);
+    cfg.warm_up = 20;
+    cfg.motion_weight = 1.0;
+    cfg.motion_start = 25;
+    cfg.flow_preset = "fast".into();
+    cfg.densify.from = 10;
+    cfg.densify.interval = 20;
+    let run = |eval_at: Option<u32>| {
+        let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
+        while tr.iteration < 60 {
+            if Some(tr.iteration) == eval_at {
+                // Every path of the evaluator: scores, pictures, a free view, a PLY export.
+                let per = tr.evaluate(true).unwrap();
+                assert!(per.iter().all(|e| e.psnr.is_finite()));
+                let cam = tr.val[0].camera;
+                tr.render_view(&cam, 0.5, Some(0.25)).unwrap();
+                tr.deformed_gaussians(0.7).unwrap();
+            }
+            tr.step(false, false).unwrap();
+        }
+        tr.checkpoint().unwrap()
+    };
+    let straight = run(None);
+    for at in [15, 40] {
+        assert!(
+            run(Some(at)) == straight,
+            "evaluating at iteration {at} changed the trained parameters, moments or statistics"
+        );
+    }
 }
