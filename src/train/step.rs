@@ -6,7 +6,7 @@ use super::passes::{
     AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass, Slot,
 };
 use super::plan::StepPlan;
-use crate::kernels::raster::{OutputGrads, RenderOpts};
+use crate::kernels::raster::{OutputGrads, RenderOpts, SplatInputs};
 use crate::model::state::Model;
 use crate::vk::Recorder;
 
@@ -26,6 +26,36 @@ pub struct StepPasses {
     pub watch: OverflowWatch,
 }
 
+impl StepPasses {
+    /// The motion term of step `p`, when it has one.
+    fn motion_of(&self, p: &StepPlan) -> Option<&MotionTerm> {
+        self.motion.as_ref().filter(|_| p.motion.is_some())
+    }
+
+    /// What the photometric render draws: the Gaussians at t1, blending δ when this step's
+    /// motion term splats it there (direct order).
+    fn photo<'a>(&'a self, model: &'a Model, p: &StepPlan) -> SplatInputs<'a> {
+        let g = model
+            .gaussians
+            .splats(self.deform.drawn(Slot::T1), p.sh_degree);
+        match self.motion_of(p) {
+            Some(m) => m.splat_on(g, m.roles.photo_splats),
+            None => g,
+        }
+    }
+
+    /// Upstream gradients of the photometric render: the loss's, plus ∂L/∂F_disp when it
+    /// splatted δ.
+    fn photo_grads(&self, p: &StepPlan) -> OutputGrads<'_> {
+        let m = self.motion_of(p).filter(|m| m.roles.photo_splats);
+        OutputGrads {
+            rgba: self.loss.d_render(),
+            depth: None,
+            features: m.map(|m| m.flow_grad()),
+        }
+    }
+}
+
 /// Records iteration `p` into `rec`. Reads nothing back: the host learns about overflows
 /// from `s.watch` after the submit (the optimiser already skipped an overflowed step).
 pub fn record_step(
@@ -37,8 +67,7 @@ pub fn record_step(
     lambda_ssim: f32,
 ) {
     let (a, g) = (&frames[p.frame], &model.gaussians);
-    let motion = p.motion.as_ref().zip(s.motion.as_mut());
-    let pair = motion.as_ref().map(|(mp, _)| (a, &frames[mp.pair]));
+    let pair = p.motion.map(|mp| (a, &frames[mp.pair]));
     let opts = RenderOpts {
         background: p.background,
         alpha_max: ALPHA_MAX,
@@ -46,7 +75,7 @@ pub fn record_step(
     rec.set_zone("deform");
     s.deform
         .forward(rec, model, Slot::T1, p.deform_active.then_some(p.t1));
-    if let Some((mp, m)) = &motion {
+    if let (Some(mp), Some(m)) = (p.motion, s.motion_of(p)) {
         s.deform.mlp_forward(rec, model, Slot::T2, mp.t2);
         m.displacement(rec, &s.deform, g.n);
         if m.roles.inter_at_t2 {
@@ -54,39 +83,22 @@ pub fn record_step(
         }
     }
     rec.set_zone("raster");
-    let photo_splats = motion.as_ref().is_some_and(|(_, m)| m.roles.photo_splats);
-    let splats = g.splats(s.deform.drawn(Slot::T1), p.sh_degree);
-    let photo = match &motion {
-        Some((_, m)) => m.splat_on(splats, photo_splats),
-        None => splats,
-    };
-    s.render.forward(rec, &a.camera, &photo, &opts);
+    s.render.forward(rec, &a.camera, &s.photo(model, p), &opts);
     rec.set_zone("loss");
     s.loss.record(rec, &s.render, a.target.all(), lambda_ssim);
-    if let (Some((mp, m)), Some(pair)) = (motion, pair) {
+    if let (Some(mp), Some(m), Some(pair)) = (p.motion, s.motion.as_mut(), pair) {
         rec.set_zone("intermediate");
         m.render_intermediate(rec, model, &s.deform, pair, p.sh_degree, &opts);
         rec.set_zone("flow");
         m.scene_motion(rec, pair.0, pair.1);
         rec.set_zone("motion");
-        m.loss(rec, &s.render, mp);
+        m.loss(rec, &s.render, &mp);
     }
-    let m = s.motion.as_ref().filter(|_| p.motion.is_some());
     rec.set_zone("raster bwd");
-    let d_photo = OutputGrads {
-        rgba: s.loss.d_render(),
-        depth: None,
-        features: m.filter(|_| photo_splats).map(|m| m.flow_grad()),
-    };
-    let photo = match m {
-        Some(m) => m.splat_on(
-            g.splats(s.deform.drawn(Slot::T1), p.sh_degree),
-            photo_splats,
-        ),
-        None => g.splats(s.deform.drawn(Slot::T1), p.sh_degree),
-    };
-    s.render.backward(rec, &a.camera, &photo, &opts, &d_photo);
-    if let (Some(m), Some(pair)) = (m, pair) {
+    let photo = s.photo(model, p);
+    s.render
+        .backward(rec, &a.camera, &photo, &opts, &s.photo_grads(p));
+    if let (Some(m), Some(pair)) = (s.motion_of(p), pair) {
         m.intermediate_backward(rec, model, &s.deform, pair, p.sh_degree, &opts);
     }
     rec.set_zone("deform bwd");
@@ -98,13 +110,13 @@ pub fn record_step(
         p.deform_active,
     );
     s.render.copy_appearance_grads(rec, g);
-    if let Some(m) = m {
+    if let Some(m) = s.motion_of(p) {
         m.displacement_backward(rec, &s.deform, &s.render, g.n);
     }
     if p.deform_active {
         rec.set_zone("mlp bwd");
         s.deform.mlp_backward(rec, model, Slot::T1, false);
-        if m.is_some() {
+        if s.motion_of(p).is_some() {
             s.deform.mlp_backward(rec, model, Slot::T2, true);
         }
     }
@@ -113,10 +125,10 @@ pub fn record_step(
         s.densify.record_stats(rec, &s.render, g.n);
     }
     rec.set_zone("adam");
-    s.adam
-        .record(rec, model, &p.lr, p.iteration, s.render.overflow_flag());
+    let skip = s.render.overflow_flag();
+    s.adam.record(rec, model, &p.lr, p.iteration, skip);
     s.watch.record(rec, 0, &s.render);
-    if let Some(m) = m {
+    if let Some(m) = s.motion_of(p) {
         s.watch.record(rec, 1, &m.inter);
     }
 }
