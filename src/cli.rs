@@ -29,7 +29,8 @@ pub enum Command {
     Render(dispflow_vk::eval::render::RenderArgs),
     /// List the Vulkan devices and the limits that matter to the kernels.
     Devices,
-    /// Time the GPU kernels (sort, scan) with GPU timestamps and print a table.
+    /// Time the GPU kernels (sort, scan, rasteriser forward/backward) with GPU timestamps and
+    /// print a table of medians.
     Bench(dispflow_vk::bench::BenchArgs),
     /// Generate or check datasets.
     Data(dispflow_vk::data::cli::DataArgs),

@@ -90,3 +90,25 @@ pub fn fill_noise(gpu: &Gpu, buf: &crate::vk::Buffer, seed: u64) {
     let words = Noise::new(seed).u32s((buf.size() / 4) as usize);
     gpu.upload(buf.all(), &words).expect("noise upload");
 }
+
+/// The rotation `rz · ry · rx` of Euler angles `a` (radians), for test cameras.
+pub fn rot_from_angles(a: [f64; 3]) -> [[f64; 3]; 3] {
+    let (sx, cx) = a[0].sin_cos();
+    let (sy, cy) = a[1].sin_cos();
+    let (sz, cz) = a[2].sin_cos();
+    let rx = [[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]];
+    let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
+    let rz = [[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]];
+    let mul = |a: [[f64; 3]; 3], b: [[f64; 3]; 3]| {
+        let mut c = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                for k in 0..3 {
+                    c[i][j] += a[i][k] * b[k][j];
+                }
+            }
+        }
+        c
+    };
+    mul(mul(rz, ry), rx)
+}

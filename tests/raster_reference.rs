@@ -386,26 +386,7 @@ fn gsplat_basic_case() {
 // ---------------------------------------------------------------------------------------------
 // 2. Finite differences of the whole f64 pipeline
 
-fn rot_from_angles(a: [f64; 3]) -> [[f64; 3]; 3] {
-    let (sx, cx) = a[0].sin_cos();
-    let (sy, cy) = a[1].sin_cos();
-    let (sz, cz) = a[2].sin_cos();
-    let rx = [[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]];
-    let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
-    let rz = [[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]];
-    let mul = |a: [[f64; 3]; 3], b: [[f64; 3]; 3]| {
-        let mut c = [[0.0; 3]; 3];
-        for i in 0..3 {
-            for j in 0..3 {
-                for k in 0..3 {
-                    c[i][j] += a[i][k] * b[k][j];
-                }
-            }
-        }
-        c
-    };
-    mul(mul(rz, ry), rx)
-}
+use dispflow_vk::testing::rot_from_angles;
 
 /// A random scene seen by a rotated, off-centre camera. Gaussian 0 lies beyond the Jacobian's
 /// x clamp, Gaussian 1 beyond its y clamp (both large enough to reach into the image), and

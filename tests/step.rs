@@ -9,7 +9,7 @@ use dispflow_vk::reference::raster::Camera;
 use dispflow_vk::reference::step::{
     dispflow_step, step_loss_f64, NormGradMode, StepInputs, StepOutputs, StepParams64,
 };
-use dispflow_vk::testing::Noise;
+use dispflow_vk::testing::{rot_from_angles, Noise};
 
 // ---------------------------------------------------------------------------------------------
 // Scene
@@ -36,28 +36,6 @@ fn unif(r: &mut Noise, lo: f64, hi: f64) -> f64 {
     lo + (hi - lo) * ((r.next_u32() >> 8) as f64 / 16_777_216.0)
 }
 
-/// `rz · ry · rx` for small angles.
-fn rotation(a: [f64; 3]) -> [[f64; 3]; 3] {
-    let (sx, cx) = a[0].sin_cos();
-    let (sy, cy) = a[1].sin_cos();
-    let (sz, cz) = a[2].sin_cos();
-    let rx = [[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]];
-    let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
-    let rz = [[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]];
-    let mul = |a: [[f64; 3]; 3], b: [[f64; 3]; 3]| {
-        let mut c = [[0.0; 3]; 3];
-        for i in 0..3 {
-            for j in 0..3 {
-                for k in 0..3 {
-                    c[i][j] += a[i][k] * b[k][j];
-                }
-            }
-        }
-        c
-    };
-    mul(mul(rz, ry), rx)
-}
-
 /// The trainer's MLP for `mlp_depth = 2`, `mlp_width = 16` on a blender scene: synthetic time
 /// net with its hidden width following the trunk width, no skip (depth < 3).
 fn small_mlp() -> MlpConfig {
@@ -82,7 +60,7 @@ fn small_mlp() -> MlpConfig {
 fn scene(seed: u64, n: usize) -> Scene {
     let mut r = Noise::new(seed);
     // Camera: mildly rotated, off-centre principal point, centre at (0.1, −0.1, −4).
-    let rot = rotation([0.08, -0.06, 0.05]);
+    let rot = rot_from_angles([0.08, -0.06, 0.05]);
     let centre = [0.1, -0.1, -4.0];
     let trans: [f32; 3] =
         std::array::from_fn(|i| -(0..3).map(|j| rot[i][j] * centre[j]).sum::<f64>() as f32);

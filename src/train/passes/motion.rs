@@ -172,7 +172,6 @@ impl MotionTerm {
     }
 
     /// Renders the intermediate image (no photometric gradient).
-    #[allow(clippy::too_many_arguments)] // the step's state, each one named
     pub fn render_intermediate(
         &self,
         rec: &mut Recorder<'_>,
