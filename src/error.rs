@@ -33,6 +33,12 @@ pub enum Error {
     },
     #[error("invalid argument: {0}")]
     Invalid(String),
+    #[error("{count} Vulkan validation error(s) during {what} (a bug in dispflow-vk; please report it):\n{messages}")]
+    Validation {
+        what: String,
+        count: usize,
+        messages: String,
+    },
     #[error(transparent)]
     Data(#[from] crate::data::DataError),
     #[error("{path}: {source}")]

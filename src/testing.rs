@@ -5,22 +5,76 @@
 //! from parallel threads, so every test in a binary shares one device behind a mutex: GPU tests
 //! run one at a time while CPU-only tests stay parallel.
 
-use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::sync::atomic::Ordering;
+use std::sync::{Mutex, MutexGuard};
 
-use crate::vk::{Gpu, GpuOptions, Validation};
+use crate::vk::{Gpu, GpuOptions, Validation, VALIDATION_ERRORS};
 
-static GPU: OnceLock<Mutex<Gpu>> = OnceLock::new();
+/// `None` before the first use and after the process-exit hook destroyed the device.
+static GPU: Mutex<Option<Gpu>> = Mutex::new(None);
+
+extern "C" {
+    // libc's: the hook runs at process exit, before the dynamic loader unloads the Vulkan
+    // driver and the validation layer.
+    fn atexit(f: extern "C" fn()) -> std::os::raw::c_int;
+}
+
+/// Destroys the shared device at exit so the validation layer reports leaked objects; a
+/// report fails the test binary (abort: nothing else can change the exit code by then).
+extern "C" fn destroy_test_device() {
+    let gpu = GPU.lock().unwrap_or_else(|e| e.into_inner()).take();
+    let Some(gpu) = gpu else { return };
+    let validated = gpu.info.validation;
+    let before = VALIDATION_ERRORS.load(Ordering::SeqCst);
+    drop(gpu);
+    let after = VALIDATION_ERRORS.load(Ordering::SeqCst);
+    if validated && after > before {
+        eprintln!(
+            "{} Vulkan validation error(s) when the test device was destroyed (leaked objects; see above)",
+            after - before
+        );
+        std::process::abort();
+    }
+}
+
+/// Whether this run is CI's (`CI=true`), where a skipped check is a failure.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+/// Marks a check that cannot run here: a failure under CI, a loud line otherwise.
+pub fn skip(what: &str, why: &str) {
+    if in_ci() {
+        panic!("CI=true: {what} cannot run ({why}); a skipped check is a failure in CI");
+    }
+    eprintln!("SKIPPED {what}: {why}");
+}
+
+/// Devices that the library makes itself (inside `train`/`eval`/`render`) load the validation
+/// layer too, unless `DISPFLOW_VALIDATION` says otherwise; those commands fail on a
+/// validation error.
+pub fn validate_command_devices() {
+    if std::env::var_os("DISPFLOW_VALIDATION").is_none() {
+        std::env::set_var("DISPFLOW_VALIDATION", "1");
+    }
+}
 
 /// The process-wide test device, locked for the caller. Validation is on when the layer is
-/// installed (`DISPFLOW_VALIDATION=required` makes a missing layer an error, as CI does). When
-/// the guard drops, any validation error reported meanwhile fails the test.
+/// installed (`DISPFLOW_VALIDATION=required` makes a missing layer an error, as CI does; under
+/// `CI=true` a missing layer fails too). Messages from creating the device fail the first
+/// test; when the guard drops, any validation error reported meanwhile fails the test.
 pub fn gpu() -> TestGpu {
-    let m = GPU.get_or_init(|| {
+    let mut guard = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    if guard.is_none() {
         let mut opts = GpuOptions::from_env();
         if opts.validation == Validation::Off
             && std::env::var("DISPFLOW_VALIDATION").as_deref() != Ok("0")
         {
-            opts.validation = Validation::IfAvailable;
+            opts.validation = if in_ci() {
+                Validation::Required
+            } else {
+                Validation::IfAvailable
+            };
         }
         let gpu = Gpu::new(&opts).unwrap_or_else(|e| panic!("test device: {e}"));
         eprintln!(
@@ -29,27 +83,37 @@ pub fn gpu() -> TestGpu {
             gpu.info.subgroup_size,
             if gpu.info.validation { "on" } else { "off" }
         );
-        Mutex::new(gpu)
-    });
-    let guard = m.lock().unwrap_or_else(|e| e.into_inner());
-    guard.take_validation_errors(); // errors of an earlier, failed test are not ours
+        if let Err(e) = gpu.check_validation("test device creation") {
+            panic!("{e}");
+        }
+        // SAFETY: registering a plain function with libc's atexit.
+        unsafe { atexit(destroy_test_device) };
+        *guard = Some(gpu);
+    } else if let Some(g) = guard.as_ref() {
+        g.take_validation_errors(); // errors of an earlier, failed test are not ours
+    }
     TestGpu { guard }
 }
 
 pub struct TestGpu {
-    guard: MutexGuard<'static, Gpu>,
+    guard: MutexGuard<'static, Option<Gpu>>,
 }
 
 impl std::ops::Deref for TestGpu {
     type Target = Gpu;
     fn deref(&self) -> &Gpu {
-        &self.guard
+        self.guard
+            .as_ref()
+            .expect("the test device exists until exit")
     }
 }
 
 impl Drop for TestGpu {
     fn drop(&mut self) {
-        let errors = self.guard.take_validation_errors();
+        let Some(gpu) = self.guard.as_ref() else {
+            return;
+        };
+        let errors = gpu.take_validation_errors();
         if !errors.is_empty() && !std::thread::panicking() {
             panic!(
                 "{} Vulkan validation error(s):\n{}",

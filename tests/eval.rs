@@ -75,6 +75,7 @@ fn pngs(dir: &Path) -> Vec<PathBuf> {
 // created from parallel threads (DESIGN §8).
 #[test]
 fn eval_and_render_a_tiny_run() {
+    testing::validate_command_devices();
     let tmp = tempfile::tempdir().unwrap();
     let data = tiny_scene(tmp.path());
     let motion = train(&data, &tmp.path().join("dispflow"), 0.1);

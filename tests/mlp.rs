@@ -419,9 +419,12 @@ fn check_fused(gpu: &Gpu, c: &Case, f16_rel: f64) -> Option<f64> {
     let label = format!("{:?} n={} fused f32", c.lay.cfg, c.n);
     assert_close(&label, &got, &want, 1e-5, 1e-7);
     if !(gpu.info.shader_float16 && gpu.info.storage_16bit) {
-        eprintln!(
-            "fp16 forward skipped: {} lacks shaderFloat16/storageBuffer16BitAccess",
-            gpu.info.name
+        dispflow_vk::testing::skip(
+            "the fp16 MLP forward",
+            &format!(
+                "{} lacks shaderFloat16/storageBuffer16BitAccess",
+                gpu.info.name
+            ),
         );
         return None;
     }

@@ -22,7 +22,10 @@ struct Case {
 impl Case {
     fn load(name: &str) -> Option<Case> {
         let Some(dir) = data_dir() else {
-            eprintln!("skipped: ../shared/data/gsplat-reference not found");
+            dispflow_vk::testing::skip(
+                "the gsplat oracle",
+                "../shared/data/gsplat-reference not found",
+            );
             return None;
         };
         let bytes = std::fs::read(dir.join(name)).expect("read safetensors");

@@ -161,6 +161,9 @@ fn config_rejects_unknown_fields_and_bad_values() {
 
 #[test]
 fn bad_data_paths_give_clear_errors() {
+    testing::validate_command_devices();
+    // The command makes its own (validated) device: not while another test submits.
+    let _serial = testing::gpu();
     let tmp = tempfile::tempdir().unwrap();
     let mut a = args();
     a.data = Some(tmp.path().join("no-such-dataset"));

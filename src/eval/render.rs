@@ -301,5 +301,6 @@ pub fn run_render(a: &RenderArgs) -> Result<Vec<PathBuf>> {
         path_name,
         out.display()
     );
+    gpu.check_validation("render")?;
     Ok(written)
 }

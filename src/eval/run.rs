@@ -160,6 +160,7 @@ pub fn run_eval(a: &EvalArgs) -> Result<Vec<Report>> {
         write_atomic(p, t.as_bytes())?;
     }
     println!("{t}");
+    gpu.check_validation("eval")?;
     Ok(reports)
 }
 

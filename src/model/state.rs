@@ -180,7 +180,7 @@ impl DeformState {
     fn check_len(&self, len: usize, what: &str) -> Result<()> {
         if len != self.layout.total {
             return Err(Error::Invalid(format!(
-                "{what}: {len} floats; this configuration's MLP ({}×{}) has {}",
+                "{what} hold {len} floats; this configuration's MLP ({}×{}) has {}",
                 self.cfg.depth, self.cfg.width, self.layout.total
             )));
         }

@@ -358,6 +358,8 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         metrics.ms_per_step.unwrap_or(f64::NAN),
         out.display()
     );
+    // A validation error anywhere in the run (device creation included) fails the command.
+    gpu.check_validation("train")?;
     Ok(metrics)
 }
 

@@ -121,6 +121,11 @@ pub struct Gpu {
     pub info: DeviceInfo,
 }
 
+/// Validation errors reported by any device of the process, ever, including those reported
+/// while a device is destroyed (leaked objects), when its own log is already going away.
+pub static VALIDATION_ERRORS: std::sync::atomic::AtomicUsize =
+    std::sync::atomic::AtomicUsize::new(0);
+
 unsafe extern "system" fn debug_callback(
     severity: vk::DebugUtilsMessageSeverityFlagsEXT,
     _ty: vk::DebugUtilsMessageTypeFlagsEXT,
@@ -135,6 +140,9 @@ unsafe extern "system" fn debug_callback(
             .into_owned()
     };
     let log = &*(user as *const Mutex<ValidationLog>);
+    if severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::ERROR) {
+        VALIDATION_ERRORS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+    }
     if let Ok(mut log) = log.lock() {
         if severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::ERROR) {
             eprintln!("[vulkan validation error] {msg}");
@@ -540,6 +548,20 @@ impl Gpu {
     /// Validation errors reported since the last call (empty when validation is off).
     pub fn take_validation_errors(&self) -> Vec<String> {
         std::mem::take(&mut self.shared.log.lock().unwrap().errors)
+    }
+
+    /// An error listing the validation errors reported since the last take (device creation
+    /// included), or `Ok` when there were none or validation is off.
+    pub fn check_validation(&self, what: &str) -> Result<()> {
+        let errors = self.take_validation_errors();
+        if errors.is_empty() {
+            return Ok(());
+        }
+        Err(Error::Validation {
+            what: what.to_string(),
+            count: errors.len(),
+            messages: errors.join("\n"),
+        })
     }
 
     /// Validation warnings seen so far.

@@ -14,7 +14,10 @@ pub fn shared_data(name: &str) -> Option<PathBuf> {
     if p.is_dir() {
         Some(p)
     } else {
-        println!("skipped: {} not found", p.display());
+        dispflow_vk::testing::skip(
+            &format!("tests on ../shared/data/{name}"),
+            &format!("{} not found", p.display()),
+        );
         None
     }
 }
