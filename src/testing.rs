@@ -176,3 +176,64 @@ pub fn rot_from_angles(a: [f64; 3]) -> [[f64; 3]; 3] {
     };
     mul(mul(rz, ry), rx)
 }
+
+/// The test every kernel test binary carries: the whole binary again at the subgroup sizes of
+/// other devices (lavapipe: `LP_NATIVE_VECTOR_WIDTH` 1024 → 32 lanes as on NVIDIA, 128 → 4),
+/// so no kernel can assume lavapipe's 8.
+#[macro_export]
+macro_rules! subgroup_reruns {
+    () => {
+        #[test]
+        fn kernels_pass_at_other_subgroup_sizes() {
+            $crate::testing::rerun_at_subgroup_sizes("kernels_pass_at_other_subgroup_sizes");
+        }
+    };
+}
+
+/// Re-runs the calling test binary (all its tests but `this_test`) with lavapipe vectors of
+/// 1024 and 128 bits and checks that the device reported 32- and 4-lane subgroups.
+pub fn rerun_at_subgroup_sizes(this_test: &str) {
+    if std::env::var_os("DISPFLOW_SUBGROUP_RERUN").is_some() {
+        return;
+    }
+    let lavapipe = gpu().info.name.contains("llvmpipe");
+    if !lavapipe {
+        skip(
+            "subgroup-size re-runs",
+            "they steer lavapipe, and this device is not lavapipe",
+        );
+        return;
+    }
+    let exe = std::env::current_exe().expect("the test binary's path");
+    for (bits, lanes) in [(1024, 32), (128, 4)] {
+        let out = std::process::Command::new(&exe)
+            .args(["--skip", this_test, "--nocapture"])
+            .env("LP_NATIVE_VECTOR_WIDTH", bits.to_string())
+            .env("DISPFLOW_SUBGROUP_RERUN", "1")
+            .output()
+            .expect("re-run the test binary");
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let tail: String = text
+            .lines()
+            .rev()
+            .take(60)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .collect::<Vec<_>>()
+            .join("\n");
+        assert!(
+            out.status.success(),
+            "{} at {lanes}-lane subgroups failed:\n{tail}",
+            exe.display()
+        );
+        assert!(
+            text.contains(&format!("(subgroup {lanes},")) || !text.contains("test device:"),
+            "LP_NATIVE_VECTOR_WIDTH={bits} did not give {lanes}-lane subgroups:\n{tail}"
+        );
+    }
+}

@@ -219,3 +219,5 @@ fn adam_covers_more_than_65535_workgroups() {
         .enumerate()
         .all(|(i, x)| (x + if i % 2 == 0 { 0.5 } else { -0.5 }).abs() < 1e-6));
 }
+
+dispflow_vk::subgroup_reruns!();

@@ -164,3 +164,5 @@ fn gpu_matches_twin() {
         );
     }
 }
+
+dispflow_vk::subgroup_reruns!();

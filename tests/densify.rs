@@ -933,3 +933,5 @@ fn twin_decisions_follow_3dgs_semantics() {
     }
     assert!(checked > n * 9 / 10, "only {checked} checked");
 }
+
+dispflow_vk::subgroup_reruns!();

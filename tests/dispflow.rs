@@ -106,3 +106,5 @@ fn motion_l1_matches_twin_and_skips_degenerate_maps() {
         }
     }
 }
+
+dispflow_vk::subgroup_reruns!();

@@ -572,3 +572,5 @@ fn speed_accuracy_table() {
         "EPE per preset: {rows:?}"
     );
 }
+
+dispflow_vk::subgroup_reruns!();

@@ -135,3 +135,5 @@ fn identical_and_flat_images_are_finite() {
         tv.ssim
     );
 }
+
+dispflow_vk::subgroup_reruns!();

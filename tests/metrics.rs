@@ -259,3 +259,5 @@ fn drc_gpu_matches_twin() {
         }
     }
 }
+
+dispflow_vk::subgroup_reruns!();

@@ -530,3 +530,5 @@ fn capacity_beyond_the_storage_buffer_range_is_a_clear_error() {
     );
     assert!(mlp.buffers(&gpu, 1000).is_ok());
 }
+
+dispflow_vk::subgroup_reruns!();

@@ -498,3 +498,5 @@ fn detached_statistics_gpu_matches_twin() {
         }
     }
 }
+
+dispflow_vk::subgroup_reruns!();

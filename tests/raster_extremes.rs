@@ -220,3 +220,5 @@ fn hundred_thousand_gaussians_in_one_tile() {
     );
     assert!(g.d_logits.iter().any(|&x| x != 0.0));
 }
+
+dispflow_vk::subgroup_reruns!();

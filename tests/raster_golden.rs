@@ -85,3 +85,5 @@ fn small_scene_matches_golden_png() {
         .count();
     assert!(lit > 64 * 48 / 5, "only {lit} lit pixels");
 }
+
+dispflow_vk::subgroup_reruns!();

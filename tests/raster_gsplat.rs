@@ -226,3 +226,5 @@ fn tiny_case_matches_gsplat() {
 fn basic_case_matches_gsplat() {
     run("basic_case.safetensors");
 }
+
+dispflow_vk::subgroup_reruns!();

@@ -250,3 +250,5 @@ fn non_square_and_multi_batch_tiles() {
     // 700 Gaussians on a narrow image: tiles hold more than one 256-splat batch.
     compare(7, 700, 96, 40, 2, 3);
 }
+
+dispflow_vk::subgroup_reruns!();

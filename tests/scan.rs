@@ -46,3 +46,5 @@ fn scan_matches_reference() {
         }
     }
 }
+
+dispflow_vk::subgroup_reruns!();

@@ -265,3 +265,5 @@ fn capacity_errors_are_reported() {
         Ok(_) => panic!("a sort of {too_big} u64 keys should exceed one binding"),
     }
 }
+
+dispflow_vk::subgroup_reruns!();

@@ -777,3 +777,5 @@ mod gpu_step {
         }
     }
 }
+
+dispflow_vk::subgroup_reruns!();

@@ -121,6 +121,14 @@ pub struct Gpu {
     pub info: DeviceInfo,
 }
 
+/// Device memory held by the allocator: live allocations and the blocks reserved for them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MemoryUse {
+    pub allocations: usize,
+    pub allocated_bytes: u64,
+    pub reserved_bytes: u64,
+}
+
 /// Validation errors reported by any device of the process, ever, including those reported
 /// while a device is destroyed (leaked objects), when its own log is already going away.
 pub static VALIDATION_ERRORS: std::sync::atomic::AtomicUsize =
@@ -562,6 +570,16 @@ impl Gpu {
             count: errors.len(),
             messages: errors.join("\n"),
         })
+    }
+
+    /// Device memory the allocator holds now.
+    pub fn memory_use(&self) -> MemoryUse {
+        let r = self.shared.allocator.lock().unwrap().generate_report();
+        MemoryUse {
+            allocations: r.allocations.len(),
+            allocated_bytes: r.total_allocated_bytes,
+            reserved_bytes: r.total_capacity_bytes,
+        }
     }
 
     /// Validation warnings seen so far.

@@ -8,6 +8,8 @@ mod pipeline;
 mod recorder;
 
 pub use buffer::{BufSlice, Buffer};
-pub use device::{list_devices, DeviceInfo, Gpu, GpuOptions, Validation, VALIDATION_ERRORS};
+pub use device::{
+    list_devices, DeviceInfo, Gpu, GpuOptions, MemoryUse, Validation, VALIDATION_ERRORS,
+};
 pub use pipeline::ComputePipeline;
 pub use recorder::{Recorder, Timings};
