@@ -78,6 +78,16 @@ pub struct FrameImages {
     pub mask: Option<Vec<u8>>,
 }
 
+/// One evaluated view: camera and time, the predecessor time for the displacement flow, and
+/// the test frame when the view is scored against one.
+#[derive(Clone, Copy)]
+struct Shot<'a> {
+    cam: &'a Camera,
+    t: f32,
+    prev: Option<f32>,
+    frame: Option<&'a GpuFrame>,
+}
+
 /// Scratch of evaluation, sized like training's (one image size, the Gaussian budget).
 pub struct Evaluator {
     deform: DeformPass,
@@ -148,16 +158,13 @@ impl Evaluator {
         f: &GpuFrame,
         want_images: bool,
     ) -> Result<FrameEval> {
-        self.evaluate(
-            gpu,
-            model,
-            view,
-            &f.camera,
-            f.time,
-            f.prev_time,
-            Some(f),
-            want_images,
-        )
+        let v = Shot {
+            cam: &f.camera,
+            t: f.time,
+            prev: f.prev_time,
+            frame: Some(f),
+        };
+        self.evaluate(gpu, model, view, v, want_images)
     }
 
     /// Renders `(camera, t)` (black background) and, with `prev`, the displacement flow since
@@ -172,7 +179,13 @@ impl Evaluator {
         t: f32,
         prev: Option<f32>,
     ) -> Result<FrameEval> {
-        self.evaluate(gpu, model, view, camera, t, prev, None, true)
+        let v = Shot {
+            cam: camera,
+            t,
+            prev,
+            frame: None,
+        };
+        self.evaluate(gpu, model, view, v, true)
     }
 
     /// The Gaussians as drawn at time `t` in the canonical layout: a standard 3DGS model of
@@ -215,23 +228,18 @@ impl Evaluator {
 
     /// Records everything for one view and reads its scores; re-runs with grown buffers when a
     /// render overflowed.
-    #[allow(clippy::too_many_arguments)] // the view's parts, each one named
     fn evaluate(
         &mut self,
         gpu: &Gpu,
         model: &Model,
         view: ModelView,
-        cam: &Camera,
-        t: f32,
-        prev: Option<f32>,
-        frame: Option<&GpuFrame>,
+        v: Shot<'_>,
         want_images: bool,
     ) -> Result<FrameEval> {
-        let px = cam.width as u64 * cam.height as u64;
-        let frozen = prev.is_some() && frame.is_some();
+        let frozen = v.prev.is_some() && v.frame.is_some();
         loop {
             let mut rec = Recorder::new(gpu)?;
-            self.record(&mut rec, model, view, cam, t, prev, frame);
+            self.record(&mut rec, model, view, v);
             rec.finish()?;
             let (full, froz) = (self.watch.read(0), self.watch.read(1));
             if full.overflowed || (frozen && froz.overflowed) {
@@ -239,21 +247,17 @@ impl Evaluator {
                 self.render.grow(gpu, need)?;
                 continue;
             }
-            return self.scores(gpu, cam, t, prev, frame, want_images, px);
+            return self.scores(gpu, v, want_images);
         }
     }
 
-    #[allow(clippy::too_many_arguments)] // the view's parts, each one named
-    fn record(
-        &mut self,
-        rec: &mut Recorder<'_>,
-        model: &Model,
-        view: ModelView,
-        cam: &Camera,
-        t: f32,
-        prev: Option<f32>,
-        frame: Option<&GpuFrame>,
-    ) {
+    fn record(&mut self, rec: &mut Recorder<'_>, model: &Model, view: ModelView, v: Shot<'_>) {
+        let Shot {
+            cam,
+            t,
+            prev,
+            frame,
+        } = v;
         let g = &model.gaussians;
         let opts = RenderOpts {
             background: [0.0; 3],
@@ -328,17 +332,14 @@ impl Evaluator {
         }
     }
 
-    #[allow(clippy::too_many_arguments)] // the view's parts, each one named
-    fn scores(
-        &self,
-        gpu: &Gpu,
-        cam: &Camera,
-        t: f32,
-        prev: Option<f32>,
-        frame: Option<&GpuFrame>,
-        want_images: bool,
-        px: u64,
-    ) -> Result<FrameEval> {
+    fn scores(&self, gpu: &Gpu, v: Shot<'_>, want_images: bool) -> Result<FrameEval> {
+        let Shot {
+            cam,
+            t,
+            prev,
+            frame,
+        } = v;
+        let px = cam.width as u64 * cam.height as u64;
         let values = match frame {
             Some(_) => self.loss.values(gpu)?,
             None => LossValues::new(f64::NAN, f64::NAN, f64::NAN, self.lambda_ssim as f64),
