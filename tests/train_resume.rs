@@ -88,10 +88,9 @@ fn evaluating_mid_run_does_not_change_training() {
         tr.checkpoint().unwrap()
     };
     let straight = run(None);
-    for at in [15, 40] {
-        assert!(
-            run(Some(at)) == straight,
-            "evaluating at iteration {at} changed the trained parameters, moments or statistics"
-        );
-    }
+    // After the warm-up, between densifications, with the motion term on.
+    assert!(
+        run(Some(30)) == straight,
+        "evaluating at iteration 30 changed the trained parameters, moments or statistics"
+    );
 }
