@@ -487,7 +487,7 @@ fn remove_stale_outputs(out: &Path) -> Result<()> {
 /// Keeps the lines of a run's `log.jsonl` up to `iteration` (the checkpoint a run resumes
 /// from): the resumed run logs the later iterations again, and a line cut short by a kill is
 /// dropped. A missing log is created empty.
-pub fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
+fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
     let bytes = match std::fs::read(path) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
