@@ -227,12 +227,12 @@ fn eval_and_render_a_tiny_run() {
     .to_string();
     assert!(e.contains("--camera 999"), "{e}");
 
-    // A deform.bin of the wrong size is refused when the model loads.
+    // A deform.bin of the wrong size is refused, before the device opens.
     let broken = tmp.path().join("broken");
     copy_run(&motion, &broken);
     std::fs::write(broken.join("deform.bin"), [0u8; 40]).unwrap();
     let e = run_eval(&eval_args(vec![broken])).unwrap_err().to_string();
-    assert!(e.contains("deformation weights hold 10 floats"), "{e}");
+    assert!(e.contains("deform.bin: 40 bytes"), "{e}");
 }
 
 fn copy_run(from: &Path, to: &Path) {

@@ -2,7 +2,7 @@
 
 use dispflow_vk::model::gaussians::HostGaussians;
 use dispflow_vk::testing;
-use dispflow_vk::train::checkpoint::{read_ply, write_ply, Checkpoint};
+use dispflow_vk::train::checkpoint::{read_ply, temp_path, write_ply, Checkpoint};
 use dispflow_vk::train::cli::{resolve_config, TrainArgs};
 use dispflow_vk::train::config::TrainConfig;
 use dispflow_vk::train::Trainer;
@@ -85,10 +85,7 @@ fn checkpoint_round_trip_and_corruption() {
     let p = tmp.path().join("last.ckpt");
     c.save(&p).unwrap();
     assert_eq!(Checkpoint::load(&p).unwrap(), c);
-    assert!(
-        !p.with_extension("tmp").exists(),
-        "the temp file was renamed away"
-    );
+    assert!(!temp_path(&p).exists(), "the temp file was renamed away");
     let bytes = std::fs::read(&p).unwrap();
     for cut in [0, 7, 20, bytes.len() / 2, bytes.len() - 1] {
         std::fs::write(&p, &bytes[..cut]).unwrap();

@@ -8,7 +8,9 @@ use super::report::{table, Report, ReportContext};
 use super::{FrameEval, FrameImages};
 use crate::data::{self, Dataset};
 use crate::error::{Error, Result};
+use crate::model::deform::MlpLayout;
 use crate::model::gaussians::HostGaussians;
+use crate::model::state::{gaussian_blobs, mlp_config_for};
 use crate::report::{self, Plot, Series, PALETTE};
 use crate::train::checkpoint::{read_ply, write_atomic};
 use crate::train::cli::{load_options, LogLine};
@@ -57,8 +59,12 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
         path: metrics_path.display().to_string(),
         source,
     })?;
-    let m: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| invalid(&metrics_path, e))?;
+    let m: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+        invalid(
+            &metrics_path,
+            format!("{e}; expected the JSON object `dispflow-vk train` writes when it finishes"),
+        )
+    })?;
     let iterations = m["iterations"]
         .as_u64()
         .and_then(|v| u32::try_from(v).ok())
@@ -81,19 +87,73 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
             "the run's dataset is not there; pass --data DIR",
         ));
     }
-    let gaussians = read_ply(&need("point_cloud.ply")?)?;
+    let ply = need("point_cloud.ply")?;
+    let gaussians = read_ply(&ply)?;
+    let coeffs = (cfg.sh_degree + 1).pow(2);
+    if gaussians.sh_coeffs != coeffs {
+        return Err(invalid(
+            &ply,
+            format!(
+                "{} SH coefficients per Gaussian; config.toml's sh_degree = {} needs {coeffs}",
+                gaussians.sh_coeffs, cfg.sh_degree
+            ),
+        ));
+    }
+    if gaussians.len() > cfg.densify.budget as usize {
+        return Err(invalid(
+            &ply,
+            format!(
+                "{} Gaussians; config.toml's densify.budget is {}",
+                gaussians.len(),
+                cfg.densify.budget
+            ),
+        ));
+    }
+    for b in gaussian_blobs("", &gaussians, false) {
+        let row = b.row.unwrap_or(1).max(1);
+        if let Some(i) = b.data.iter().position(|v| !v.is_finite()) {
+            return Err(invalid(
+                &ply,
+                format!(
+                    "Gaussian {}: {} holds {}; expected finite values (a run that diverged)",
+                    i / row,
+                    b.name,
+                    b.data[i]
+                ),
+            ));
+        }
+    }
     let weights = need("deform.bin")?;
     let bytes = std::fs::read(&weights).map_err(|source| Error::Io {
         path: weights.display().to_string(),
         source,
     })?;
-    if bytes.len() % 4 != 0 {
+    // The MLP's size follows from config.toml and the dataset's kind (its time encoding).
+    let synthetic = data::detect_format(&data_dir)? == data::Format::Blender;
+    let floats = MlpLayout::new(&mlp_config_for(synthetic, cfg.mlp_depth, cfg.mlp_width))?.total;
+    if bytes.len() != floats * 4 {
         return Err(invalid(
             &weights,
-            format!("{} bytes is not a whole number of f32", bytes.len()),
+            format!(
+                "{} bytes; config.toml's {}×{} deformation MLP for this dataset is {floats} f32 \
+                 ({} bytes): truncated, or from another run",
+                bytes.len(),
+                cfg.mlp_depth,
+                cfg.mlp_width,
+                floats * 4
+            ),
         ));
     }
     let mlp: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes);
+    if let Some(i) = mlp.iter().position(|v| !v.is_finite()) {
+        return Err(invalid(
+            &weights,
+            format!(
+                "weight {i} is {}; expected finite weights (a run that diverged)",
+                mlp[i]
+            ),
+        ));
+    }
     Ok(Run {
         dir: dir.to_path_buf(),
         cfg,
@@ -196,6 +256,11 @@ fn eval_one(gpu: &Gpu, run: &Run, pictures: bool) -> Result<Report> {
         num_gaussians: tr.n(),
     };
     let r = Report::new(&run.cfg, ctx, per);
+    // With --no-pictures no PNG has created the directory yet.
+    std::fs::create_dir_all(&out).map_err(|source| Error::Io {
+        path: out.display().to_string(),
+        source,
+    })?;
     write_atomic(&out.join("metrics.json"), r.to_json().as_bytes())?;
     let t = table(std::slice::from_ref(&r)).to_markdown();
     write_atomic(&out.join("table.md"), t.as_bytes())?;

@@ -220,10 +220,22 @@ pub struct Model {
     pub deform: DeformState,
 }
 
+/// What a model was built for that its blobs do not show: MLP depth and width (the parameter
+/// count alone is ambiguous) and the Gaussian budget (buffer capacity; densification stops at
+/// it, so it shapes the run). Recorded in checkpoints so that resuming under another
+/// configuration is refused by name.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ModelShape {
+    pub mlp_depth: u32,
+    pub mlp_width: u32,
+    pub budget: u32,
+}
+
 /// The model's part of a checkpoint (parameters and Adam moments; the trainer adds its
 /// densification statistics and the iteration).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ModelSnapshot {
+    pub shape: ModelShape,
     pub gaussians: HostGaussians,
     pub gauss_m: HostGaussians,
     pub gauss_v: HostGaussians,
@@ -232,12 +244,100 @@ pub struct ModelSnapshot {
     pub mlp_v: Vec<f32>,
 }
 
+/// One named array of a snapshot, as checkpoints store it.
+pub struct Blob<'a> {
+    pub name: String,
+    pub data: &'a [f32],
+    /// Floats per Gaussian for per-Gaussian arrays (to name the Gaussian of a bad value).
+    pub row: Option<usize>,
+    /// Never negative (Adam second moments, densification statistics).
+    pub non_negative: bool,
+}
+
+impl Blob<'_> {
+    /// Refuses a non-finite (or, for second moments, negative) value, naming the blob and
+    /// the element.
+    pub fn check_values(&self) -> Result<()> {
+        let bad = |x: f32| !x.is_finite() || (self.non_negative && x < 0.0);
+        let Some(i) = self.data.iter().position(|&x| bad(x)) else {
+            return Ok(());
+        };
+        let at = match self.row {
+            Some(r) if r > 0 => format!("element {i} (Gaussian {})", i / r),
+            _ => format!("element {i}"),
+        };
+        let want = if self.non_negative {
+            "finite values >= 0"
+        } else {
+            "finite values"
+        };
+        Err(Error::Invalid(format!(
+            "blob {}: {at} is {}; expected {want} (the run had diverged when it was saved)",
+            self.name, self.data[i]
+        )))
+    }
+}
+
+/// The per-Gaussian blobs of `g`, named `prefix` + section.
+pub fn gaussian_blobs<'a>(prefix: &str, g: &'a HostGaussians, non_negative: bool) -> Vec<Blob<'a>> {
+    let rest = 3 * (g.sh_coeffs as usize).saturating_sub(1);
+    [
+        ("means", g.means.as_flattened(), 3),
+        ("log_scales", g.log_scales.as_flattened(), 3),
+        ("quats", g.quats.as_flattened(), 4),
+        ("opacity", &g.opacity[..], 1),
+        ("sh_dc", g.sh_dc.as_flattened(), 3),
+        ("sh_rest", &g.sh_rest[..], rest),
+    ]
+    .into_iter()
+    .map(|(k, data, row)| Blob {
+        name: format!("{prefix}{k}"),
+        data,
+        row: Some(row),
+        non_negative,
+    })
+    .collect()
+}
+
+impl ModelSnapshot {
+    /// Every array with its checkpoint name: the Gaussians (`means`, …), their Adam moments
+    /// (`m.means`, …, `v.means`, …) and the MLP's (`mlp_params`, `mlp_m`, `mlp_v`).
+    pub fn blobs(&self) -> Vec<Blob<'_>> {
+        let mut b = gaussian_blobs("", &self.gaussians, false);
+        b.extend(gaussian_blobs("m.", &self.gauss_m, false));
+        b.extend(gaussian_blobs("v.", &self.gauss_v, true));
+        for (name, data, non_negative) in [
+            ("mlp_params", &self.mlp_params, false),
+            ("mlp_m", &self.mlp_m, false),
+            ("mlp_v", &self.mlp_v, true),
+        ] {
+            b.push(Blob {
+                name: name.into(),
+                data,
+                row: None,
+                non_negative,
+            });
+        }
+        b
+    }
+}
+
 impl Model {
+    /// The configuration this model was built for.
+    pub fn shape(&self) -> ModelShape {
+        ModelShape {
+            mlp_depth: self.deform.cfg.depth,
+            mlp_width: self.deform.cfg.width,
+            budget: self.gaussians.layout.capacity,
+        }
+    }
+
     /// Reads parameters and moments back.
     pub fn checkpoint(&self, gpu: &Gpu) -> Result<ModelSnapshot> {
         let g = &self.gaussians;
         let d = &self.deform;
         Ok(ModelSnapshot {
+            shape: self.shape(),
             gaussians: g.download(gpu)?,
             gauss_m: HostGaussians::download(gpu, &g.layout, &g.m, g.n)?,
             gauss_v: HostGaussians::download(gpu, &g.layout, &g.v, g.n)?,
@@ -247,11 +347,71 @@ impl Model {
         })
     }
 
+    /// Why snapshot `s` cannot be restored into this model (another configuration, arrays
+    /// that disagree, non-finite values), naming the setting or the blob; `Ok` when it can.
+    pub fn check_snapshot(&self, s: &ModelSnapshot) -> Result<()> {
+        let layout = &self.gaussians.layout;
+        let cfg = &self.deform.cfg;
+        let mismatch = |m: String| Err(Error::Invalid(m));
+        let degree = |coeffs: u32| (coeffs as f64).sqrt() as u32 - 1;
+        for (name, g) in [("", &s.gaussians), ("m.", &s.gauss_m), ("v.", &s.gauss_v)] {
+            if g.sh_coeffs != layout.sh_coeffs {
+                return mismatch(format!(
+                    "SH degree: the checkpoint's {name}Gaussians have degree {} ({} coefficients); \
+                     this configuration has sh_degree = {}",
+                    degree(g.sh_coeffs.max(1)),
+                    g.sh_coeffs,
+                    degree(layout.sh_coeffs)
+                ));
+            }
+        }
+        let (have, want) = (s.shape, self.shape());
+        if (have.mlp_depth, have.mlp_width) != (want.mlp_depth, want.mlp_width) {
+            return mismatch(format!(
+                "deformation MLP: the checkpoint's is {}×{} (depth×width); this configuration \
+                 has mlp_depth = {}, mlp_width = {}",
+                have.mlp_depth, have.mlp_width, want.mlp_depth, want.mlp_width
+            ));
+        }
+        if have.budget != want.budget {
+            return mismatch(format!(
+                "Gaussian budget: the checkpoint's run had densify.budget = {}; this \
+                 configuration has {}",
+                have.budget, want.budget
+            ));
+        }
+        let n = s.gaussians.len();
+        if n > layout.capacity as usize {
+            return Err(Error::Capacity {
+                what: "Gaussian budget (checkpoint)",
+                capacity: layout.capacity as u64,
+                asked: n as u64,
+            });
+        }
+        for b in s.blobs() {
+            let want_len = b.row.map_or(self.deform.layout.total, |r| n * r);
+            if b.data.len() != want_len {
+                let what = if b.row.is_some() {
+                    format!("{n} Gaussians need {want_len}")
+                } else {
+                    format!(
+                        "this configuration's {}×{} MLP for this dataset kind has {want_len} \
+                         (a run on a dataset of another kind?)",
+                        cfg.depth, cfg.width
+                    )
+                };
+                return mismatch(format!("blob {}: {} floats; {what}", b.name, b.data.len()));
+            }
+            b.check_values()?;
+        }
+        Ok(())
+    }
+
     /// Restores parameters and moments written by [`Model::checkpoint`] of a model with the
-    /// same configuration.
+    /// same configuration. Everything is checked ([`Model::check_snapshot`]) before the first
+    /// upload, so a refused snapshot leaves the model as it was.
     pub fn restore(&mut self, gpu: &Gpu, s: &ModelSnapshot) -> Result<()> {
-        self.deform
-            .check_len(s.mlp_params.len(), "checkpoint MLP weights")?;
+        self.check_snapshot(s)?;
         let g = &mut self.gaussians;
         g.upload(gpu, &s.gaussians, "Gaussian budget (checkpoint)")?;
         s.gauss_m.upload(gpu, &g.layout, &g.m)?;
@@ -267,13 +427,15 @@ impl Model {
     /// refusing non-finite values and mismatched shapes.
     pub fn load(&mut self, gpu: &Gpu, g: &HostGaussians, mlp: &[f32]) -> Result<()> {
         self.deform.check_len(mlp.len(), "deformation weights")?;
+        let rest = 3 * (g.sh_coeffs as usize).saturating_sub(1);
         let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
         if let Some(i) = (0..g.len()).find(|&i| {
             !(finite(&g.means[i])
                 && finite(&g.log_scales[i])
                 && finite(&g.quats[i])
                 && g.opacity[i].is_finite()
-                && finite(&g.sh_dc[i]))
+                && finite(&g.sh_dc[i])
+                && finite(g.sh_rest.get(i * rest..(i + 1) * rest).unwrap_or(&[])))
         }) {
             return Err(Error::Invalid(format!(
                 "Gaussian {i} has a non-finite parameter"

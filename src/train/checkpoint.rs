@@ -1,8 +1,12 @@
 //! Checkpoints (atomic: temp file + fsync + rename) and the standard 3DGS PLY export.
 //!
-//! Checkpoint layout: magic `DFVKCKPT`, u64 little-endian length of a JSON header, the header
-//! (iteration, counts, blob names and lengths), then each blob as little-endian f32 in header
-//! order. Small, dependency-free, and every length is checked on read.
+//! Checkpoint layout (format version [`CHECKPOINT_VERSION`]): magic `DFVKCKPT`, u64
+//! little-endian length of a JSON header, the header, u64 little-endian FNV-1a 64 of the
+//! header bytes, then each blob as little-endian f32 in header order. The header holds the
+//! format version, the iteration, the model's shape (SH coefficients, MLP depth and width,
+//! Gaussian budget) and per blob its name, length in floats and FNV-1a 64 of its bytes (hex).
+//! Every length and checksum is checked on read; a mismatch names the file and the blob.
+//! Small and dependency-free.
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -12,9 +16,16 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::model::gaussians::HostGaussians;
-use crate::model::state::ModelSnapshot;
+use crate::model::state::{ModelShape, ModelSnapshot};
 
 const MAGIC: &[u8; 8] = b"DFVKCKPT";
+
+/// The checkpoint format this build writes and reads. Version 1 (no checksums, no model
+/// shape) is refused with a message that says so.
+pub const CHECKPOINT_VERSION: u32 = 2;
+
+/// Names of the densification statistics blobs, in [`Checkpoint::densify_stats`] order.
+pub const DENSIFY_STATS: [&str; 3] = ["grad_accum", "denom", "max_radii"];
 
 /// Everything needed to continue a run exactly where it stopped.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -28,11 +39,29 @@ pub struct Checkpoint {
 }
 
 #[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 struct Header {
     version: u32,
     iteration: u32,
     sh_coeffs: u32,
-    blobs: Vec<(String, u64)>,
+    shape: ModelShape,
+    blobs: Vec<BlobEntry>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BlobEntry {
+    name: String,
+    floats: u64,
+    /// FNV-1a 64 of the blob's bytes, 16 hex digits.
+    fnv1a64: String,
+}
+
+/// 64-bit FNV-1a of `bytes`.
+pub fn fnv1a64(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
+    })
 }
 
 fn io_err(path: &Path, source: std::io::Error) -> Error {
@@ -40,15 +69,6 @@ fn io_err(path: &Path, source: std::io::Error) -> Error {
         path: path.display().to_string(),
         source,
     }
-}
-
-fn gauss_blobs<'a>(prefix: &str, g: &'a HostGaussians, out: &mut Vec<(String, &'a [f32])>) {
-    out.push((format!("{prefix}means"), g.means.as_flattened()));
-    out.push((format!("{prefix}log_scales"), g.log_scales.as_flattened()));
-    out.push((format!("{prefix}quats"), g.quats.as_flattened()));
-    out.push((format!("{prefix}opacity"), &g.opacity));
-    out.push((format!("{prefix}sh_dc"), g.sh_dc.as_flattened()));
-    out.push((format!("{prefix}sh_rest"), &g.sh_rest));
 }
 
 fn take_gauss(
@@ -62,81 +82,117 @@ fn take_gauss(
             .ok_or_else(|| bad(path, &format!("blob {prefix}{k} missing")))
     };
     fn arr<const N: usize>(v: Vec<f32>) -> Vec<[f32; N]> {
-        v.chunks_exact(N).map(|c| c.try_into().unwrap()).collect()
+        v.chunks_exact(N)
+            .map(|c| c.try_into().expect("chunks of N"))
+            .collect()
     }
-    let g = HostGaussians {
+    let raw = [
+        get("means")?,
+        get("log_scales")?,
+        get("quats")?,
+        get("opacity")?,
+        get("sh_dc")?,
+        get("sh_rest")?,
+    ];
+    let n = raw[0].len() / 3;
+    let rest = 3 * (sh_coeffs as usize - 1);
+    for (v, (k, row)) in raw.iter().zip([
+        ("means", 3),
+        ("log_scales", 3),
+        ("quats", 4),
+        ("opacity", 1),
+        ("sh_dc", 3),
+        ("sh_rest", rest),
+    ]) {
+        if v.len() != n * row {
+            return Err(bad(
+                path,
+                &format!(
+                    "blob {prefix}{k}: {} floats; {n} Gaussians need {}",
+                    v.len(),
+                    n * row
+                ),
+            ));
+        }
+    }
+    let [means, log_scales, quats, opacity, sh_dc, sh_rest] = raw;
+    Ok(HostGaussians {
         sh_coeffs,
-        means: arr::<3>(get("means")?),
-        log_scales: arr::<3>(get("log_scales")?),
-        quats: arr::<4>(get("quats")?),
-        opacity: get("opacity")?,
-        sh_dc: arr::<3>(get("sh_dc")?),
-        sh_rest: get("sh_rest")?,
-    };
-    let n = g.means.len();
-    if g.log_scales.len() != n
-        || g.quats.len() != n
-        || g.opacity.len() != n
-        || g.sh_dc.len() != n
-        || g.sh_rest.len() != n * 3 * (sh_coeffs as usize - 1)
-    {
-        return Err(bad(
-            path,
-            &format!("{prefix}Gaussian blobs disagree on the count ({n})"),
-        ));
-    }
-    Ok(g)
+        means: arr::<3>(means),
+        log_scales: arr::<3>(log_scales),
+        quats: arr::<4>(quats),
+        opacity,
+        sh_dc: arr::<3>(sh_dc),
+        sh_rest,
+    })
 }
 
 fn bad(path: &Path, why: &str) -> Error {
     Error::Invalid(format!("{}: not a valid checkpoint: {why}", path.display()))
 }
 
-/// Writes `bytes` to `path` atomically: a killed process leaves the old file or the new one.
+/// Writes `bytes` to `path` atomically: a killed process leaves the old file or the new one
+/// (and at worst a stale `<name>.tmp` beside it, which the next write replaces).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    {
-        let mut f = std::fs::File::create(&tmp).map_err(|e| io_err(&tmp, e))?;
-        f.write_all(bytes).map_err(|e| io_err(&tmp, e))?;
-        f.sync_all().map_err(|e| io_err(&tmp, e))?;
+    let tmp = temp_path(path);
+    let write = || -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()
+    };
+    if let Err(e) = write() {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io_err(&tmp, e));
     }
-    std::fs::rename(&tmp, path).map_err(|e| io_err(path, e))?;
+    if let Err(e) = std::fs::rename(&tmp, path) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io_err(path, e));
+    }
     if let Some(dir) = path.parent().and_then(|d| std::fs::File::open(d).ok()) {
         let _ = dir.sync_all(); // make the rename itself durable where the platform allows
     }
     Ok(())
 }
 
+/// The temp file [`write_atomic`] writes before the rename: `<name>.tmp` beside `path`.
+pub fn temp_path(path: &Path) -> PathBuf {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".tmp");
+    path.with_file_name(name)
+}
+
 impl Checkpoint {
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut blobs: Vec<(String, &[f32])> = Vec::new();
-        gauss_blobs("", &self.model.gaussians, &mut blobs);
-        gauss_blobs("m.", &self.model.gauss_m, &mut blobs);
-        gauss_blobs("v.", &self.model.gauss_v, &mut blobs);
-        for (k, v) in ["grad_accum", "denom", "max_radii"]
-            .iter()
-            .zip(&self.densify_stats)
-        {
+        let mut blobs: Vec<(String, &[f32])> = self
+            .model
+            .blobs()
+            .into_iter()
+            .map(|b| (b.name, b.data))
+            .collect();
+        for (k, v) in DENSIFY_STATS.iter().zip(&self.densify_stats) {
             blobs.push((k.to_string(), v));
         }
-        blobs.push(("mlp_params".into(), &self.model.mlp_params));
-        blobs.push(("mlp_m".into(), &self.model.mlp_m));
-        blobs.push(("mlp_v".into(), &self.model.mlp_v));
         let header = Header {
-            version: 1,
+            version: CHECKPOINT_VERSION,
             iteration: self.iteration,
             sh_coeffs: self.model.gaussians.sh_coeffs,
+            shape: self.model.shape,
             blobs: blobs
                 .iter()
-                .map(|(k, v)| (k.clone(), v.len() as u64))
+                .map(|(k, v)| BlobEntry {
+                    name: k.clone(),
+                    floats: v.len() as u64,
+                    fnv1a64: format!("{:016x}", fnv1a64(bytemuck::cast_slice(v))),
+                })
                 .collect(),
         };
         let h = serde_json::to_vec(&header).expect("header serialises");
         let mut out =
-            Vec::with_capacity(16 + h.len() + blobs.iter().map(|b| b.1.len() * 4).sum::<usize>());
+            Vec::with_capacity(24 + h.len() + blobs.iter().map(|b| b.1.len() * 4).sum::<usize>());
         out.extend_from_slice(MAGIC);
         out.extend_from_slice(&(h.len() as u64).to_le_bytes());
         out.extend_from_slice(&h);
+        out.extend_from_slice(&fnv1a64(&h).to_le_bytes());
         for (_, v) in &blobs {
             out.extend_from_slice(bytemuck::cast_slice(v));
         }
@@ -147,35 +203,91 @@ impl Checkpoint {
         write_atomic(path, &self.to_bytes())
     }
 
+    /// Reads and checks a checkpoint: magic, format version, header checksum, every blob's
+    /// length and checksum, counts that agree. Values are checked by the restore.
     pub fn load(path: &Path) -> Result<Checkpoint> {
         let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
         if bytes.len() < 16 || &bytes[..8] != MAGIC {
             return Err(bad(path, "wrong magic (expected DFVKCKPT)"));
         }
-        let hl = u64::from_le_bytes(bytes[8..16].try_into().unwrap()) as usize;
-        let hdr = bytes
-            .get(16..16usize.saturating_add(hl))
+        let hl = u64::from_le_bytes(bytes[8..16].try_into().expect("8 bytes"));
+        let hdr = usize::try_from(hl)
+            .ok()
+            .and_then(|hl| bytes.get(16..16usize.checked_add(hl)?))
             .ok_or_else(|| bad(path, "truncated header"))?;
+        // The version first, so a checkpoint of another format says which it is.
+        let any: serde_json::Value =
+            serde_json::from_slice(hdr).map_err(|e| bad(path, &format!("header: {e}")))?;
+        match any.get("version").and_then(|v| v.as_u64()) {
+            Some(v) if v == CHECKPOINT_VERSION as u64 => {}
+            Some(v) => {
+                return Err(bad(
+                    path,
+                    &format!(
+                        "format version {v}; this build reads version {CHECKPOINT_VERSION} \
+                         (start the run again without --resume, or resume with the build \
+                         that wrote it)"
+                    ),
+                ))
+            }
+            None => return Err(bad(path, "header: no format version")),
+        }
+        let mut at = 16 + hdr.len();
+        let stored = bytes
+            .get(at..at + 8)
+            .ok_or_else(|| bad(path, "truncated header checksum"))?;
+        if u64::from_le_bytes(stored.try_into().expect("8 bytes")) != fnv1a64(hdr) {
+            return Err(bad(
+                path,
+                "header checksum mismatch (the header is corrupt)",
+            ));
+        }
+        at += 8;
         let header: Header =
             serde_json::from_slice(hdr).map_err(|e| bad(path, &format!("header: {e}")))?;
-        if header.version != 1 || !matches!(header.sh_coeffs, 1 | 4 | 9 | 16) {
-            return Err(bad(path, "unsupported version or SH coefficient count"));
+        let sc = header.sh_coeffs;
+        if !matches!(sc, 1 | 4 | 9 | 16) {
+            return Err(bad(
+                path,
+                &format!("header: sh_coeffs = {sc}; expected 1, 4, 9 or 16"),
+            ));
         }
-        let mut at = 16 + hl;
         let mut m = BTreeMap::new();
-        for (k, len) in header.blobs {
-            let end = (len as usize)
-                .checked_mul(4)
-                .and_then(|b| b.checked_add(at))
-                .filter(|&e| e <= bytes.len());
-            let end = end.ok_or_else(|| bad(path, &format!("blob {k} truncated")))?;
-            m.insert(k, bytemuck::pod_collect_to_vec::<u8, f32>(&bytes[at..end]));
+        for b in header.blobs {
+            let end = usize::try_from(b.floats)
+                .ok()
+                .and_then(|n| n.checked_mul(4))
+                .and_then(|n| n.checked_add(at))
+                .filter(|&e| e <= bytes.len())
+                .ok_or_else(|| bad(path, &format!("blob {} truncated", b.name)))?;
+            let data = &bytes[at..end];
+            let sum = format!("{:016x}", fnv1a64(data));
+            if sum != b.fnv1a64 {
+                return Err(bad(
+                    path,
+                    &format!(
+                        "blob {}: checksum mismatch (stored {}, computed {sum}); the file is \
+                         corrupt",
+                        b.name, b.fnv1a64
+                    ),
+                ));
+            }
+            if m.insert(
+                b.name.clone(),
+                bytemuck::pod_collect_to_vec::<u8, f32>(data),
+            )
+            .is_some()
+            {
+                return Err(bad(path, &format!("blob {} appears twice", b.name)));
+            }
             at = end;
         }
         if at != bytes.len() {
-            return Err(bad(path, "trailing bytes"));
+            return Err(bad(
+                path,
+                &format!("{} trailing bytes after the last blob", bytes.len() - at),
+            ));
         }
-        let sc = header.sh_coeffs;
         let gaussians = take_gauss("", &mut m, sc, path)?;
         let gauss_m = take_gauss("m.", &mut m, sc, path)?;
         let gauss_v = take_gauss("v.", &mut m, sc, path)?;
@@ -183,7 +295,9 @@ impl Checkpoint {
             m.remove(k)
                 .ok_or_else(|| bad(path, &format!("blob {k} missing")))
         };
-        let densify_stats = [get("grad_accum")?, get("denom")?, get("max_radii")?];
+        let densify_stats = DENSIFY_STATS.map(&mut get);
+        let [a, b, c] = densify_stats;
+        let densify_stats = [a?, b?, c?];
         let n = gaussians.len();
         if gauss_m.len() != n || gauss_v.len() != n || densify_stats.iter().any(|s| s.len() != n) {
             return Err(bad(
@@ -195,9 +309,13 @@ impl Checkpoint {
         if mlp_m.len() != mlp_params.len() || mlp_v.len() != mlp_params.len() {
             return Err(bad(path, "MLP moments disagree with the parameter count"));
         }
+        if let Some(k) = m.keys().next() {
+            return Err(bad(path, &format!("unexpected blob {k}")));
+        }
         Ok(Checkpoint {
             iteration: header.iteration,
             model: ModelSnapshot {
+                shape: header.shape,
                 gaussians,
                 gauss_m,
                 gauss_v,

@@ -209,12 +209,46 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     let dataset = data::load(&data_dir, &load_options(&cfg))?;
     let gpu = Gpu::new_default()?;
     eprintln!("device: {}", gpu.info);
-    let mut tr = Trainer::new(&gpu, &cfg, &dataset)?;
-    std::fs::create_dir_all(out.join("checkpoints")).map_err(io(&out))?;
+    let mut tr = Trainer::new(&gpu, &cfg, &dataset).map_err(|e| match e {
+        Error::Alloc { .. }
+        | Error::Vulkan(
+            ash::vk::Result::ERROR_OUT_OF_DEVICE_MEMORY | ash::vk::Result::ERROR_OUT_OF_HOST_MEMORY,
+        ) => Error::Invalid(format!(
+            "allocating the training buffers on {} failed ({e}): config field densify.budget \
+             = {} Gaussians at SH degree {} does not fit; lower --budget (or --sh-degree, \
+             --max-resolution)",
+            gpu.info.name, cfg.densify.budget, cfg.sh_degree
+        )),
+        e => e,
+    })?;
     let ckpt = last_checkpoint(&out);
-    if a.resume && ckpt.is_file() {
+    let resume = a.resume && ckpt.is_file();
+    if resume {
+        // Everything is checked before the run directory changes.
+        check_same_config(&out.join("config.toml"), &cfg)?;
         let c = Checkpoint::load(&ckpt)?;
-        tr.restore(&c)?;
+        if c.iteration > cfg.iterations {
+            return Err(Error::Invalid(format!(
+                "{}: the checkpoint is at iteration {}, past this configuration's iterations = {}",
+                ckpt.display(),
+                c.iteration,
+                cfg.iterations
+            )));
+        }
+        tr.restore(&c).map_err(|e| {
+            Error::Invalid(format!(
+                "{}: cannot resume from this checkpoint: {}",
+                ckpt.display(),
+                message(&e)
+            ))
+        })?;
+    }
+    std::fs::create_dir_all(out.join("checkpoints")).map_err(io(&out))?;
+    remove_stale_outputs(&out)?;
+    let log_path = out.join("log.jsonl");
+    if resume {
+        // Lines logged after the checkpoint are logged again by the resumed run.
+        truncate_log(&log_path, tr.iteration)?;
         eprintln!(
             "resumed from {} at iteration {}",
             ckpt.display(),
@@ -222,6 +256,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         );
     } else {
         write_atomic(&out.join("config.toml"), cfg.to_toml().as_bytes())?;
+        write_atomic(&log_path, b"")?;
     }
     eprintln!(
         "training {} frames ({} val) at {}×{}, {} Gaussians, MLP {}×{}, {} iterations",
@@ -249,12 +284,8 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     pb.set_position(tr.iteration as u64);
     let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let mut step_ms = Vec::new();
-    let log_path = out.join("log.jsonl");
     let mut log_file = std::fs::OpenOptions::new()
-        .create(true)
-        .append(tr.iteration > 0)
-        .write(true)
-        .truncate(tr.iteration == 0)
+        .append(true)
         .open(&log_path)
         .map_err(io(&log_path))?;
     while tr.iteration < cfg.iterations {
@@ -342,11 +373,12 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     };
     let mut metrics = Report::new(&cfg, ctx, per);
     metrics.initial_psnr = initial_psnr;
-    metrics.ms_per_step = Some(crate::bench::median(step_ms));
+    // None when no step ran (a resumed run that had already finished).
+    metrics.ms_per_step = (!step_ms.is_empty()).then(|| crate::bench::median(step_ms));
     write_atomic(&out.join("metrics.json"), metrics.to_json().as_bytes())?;
     let fmt = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.4}"));
     println!(
-        "test PSNR {:.2} dB (initial {}), SSIM {:.4}, MMAP {}, DRC {}, {} Gaussians, {:.1} ms/step; outputs in {}",
+        "test PSNR {:.2} dB (initial {}), SSIM {:.4}, MMAP {}, DRC {}, {} Gaussians, {} ms/step; outputs in {}",
         metrics.psnr,
         metrics
             .initial_psnr
@@ -355,12 +387,124 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         fmt(metrics.mmap),
         fmt(metrics.drc),
         metrics.num_gaussians,
-        metrics.ms_per_step.unwrap_or(f64::NAN),
+        metrics
+            .ms_per_step
+            .map_or("n/a".into(), |v| format!("{v:.1}")),
         out.display()
     );
     // A validation error anywhere in the run (device creation included) fails the command.
     gpu.check_validation("train")?;
     Ok(metrics)
+}
+
+/// The message of `e` without the variant's prefix (for errors wrapped in more context).
+fn message(e: &Error) -> String {
+    match e {
+        Error::Invalid(m) => m.clone(),
+        e => e.to_string(),
+    }
+}
+
+/// A resumed run must continue the configuration it started with (its `config.toml`):
+/// another one would silently train something else from the checkpoint on. Names every
+/// field that differs.
+fn check_same_config(path: &Path, cfg: &TrainConfig) -> Result<()> {
+    if !path.is_file() {
+        return Err(Error::Invalid(format!(
+            "{}: missing; --resume needs the run's configuration beside its checkpoint",
+            path.display()
+        )));
+    }
+    let run = TrainConfig::from_toml_over(cfg, path)?;
+    if run == *cfg {
+        return Ok(());
+    }
+    let flat = |c: &TrainConfig| {
+        let mut out = Vec::new();
+        flatten(
+            "",
+            &toml::Value::try_from(c).expect("config serialises"),
+            &mut out,
+        );
+        out
+    };
+    let (was, now) = (flat(&run), flat(cfg));
+    let diff: Vec<String> = was
+        .iter()
+        .zip(&now)
+        .filter(|(a, b)| a != b)
+        .map(|((k, a), (_, b))| format!("{k} = {b} (the run has {a})"))
+        .collect();
+    Err(Error::Invalid(format!(
+        "{}: --resume with another configuration: {}; resume with the run's settings \
+         (e.g. --config {}) or train into a new --out",
+        path.display(),
+        diff.join(", "),
+        path.display()
+    )))
+}
+
+fn flatten(prefix: &str, v: &toml::Value, out: &mut Vec<(String, String)>) {
+    match v {
+        toml::Value::Table(t) => {
+            for (k, v) in t {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                flatten(&key, v, out);
+            }
+        }
+        v => out.push((prefix.to_string(), v.to_string())),
+    }
+}
+
+/// Before training: removes what a killed run can leave behind (`*.tmp` files of interrupted
+/// atomic writes) and `metrics.json`, the mark of a finished run, which is written again
+/// last, so a run killed from here on never looks finished.
+fn remove_stale_outputs(out: &Path) -> Result<()> {
+    for dir in [
+        out.to_path_buf(),
+        out.join("checkpoints"),
+        out.join("renders"),
+    ] {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.extension().is_some_and(|x| x == "tmp") && p.is_file() {
+                std::fs::remove_file(&p).map_err(io(&p))?;
+            }
+        }
+    }
+    let m = out.join("metrics.json");
+    if m.is_file() {
+        std::fs::remove_file(&m).map_err(io(&m))?;
+    }
+    Ok(())
+}
+
+/// Keeps the lines of a run's `log.jsonl` up to `iteration` (the checkpoint a run resumes
+/// from): the resumed run logs the later iterations again, and a line cut short by a kill is
+/// dropped. A missing log is created empty.
+fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(io(path)(e)),
+    };
+    let text = String::from_utf8_lossy(&bytes);
+    let mut keep = String::new();
+    for line in text.split_inclusive('\n') {
+        let whole = line.ends_with('\n');
+        match serde_json::from_str::<LogLine>(line.trim()) {
+            Ok(l) if whole && l.iteration <= iteration => keep.push_str(line),
+            _ => break,
+        }
+    }
+    write_atomic(path, keep.as_bytes())
 }
 
 /// Writes images (RGBA f32, alpha ignored) side by side as one 8-bit PNG.

@@ -6,6 +6,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
+/// Most Gaussians a run may be configured for: 45 higher-band SH floats per Gaussian must stay
+/// addressable with the kernels' 32-bit float indices.
+pub const MAX_BUDGET: u32 = 1 << 26;
+
 /// Learning rates (Deformable-3DGS defaults; position rates are scaled by the scene extent).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -267,7 +271,8 @@ impl TrainConfig {
         let cfg: TrainConfig = merged
             .try_into()
             .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
-        cfg.validate()?;
+        cfg.problem()
+            .map_err(|m| Error::Invalid(format!("{}: {m}", path.display())))?;
         Ok(cfg)
     }
 
@@ -275,32 +280,137 @@ impl TrainConfig {
         toml::to_string_pretty(self).expect("config serialises")
     }
 
-    /// Rejects settings that cannot run, naming the field.
+    /// Rejects every setting that would crash (a zero divisor, an out-of-range degree) or
+    /// poison training (a non-finite or negative weight or learning rate), naming the field,
+    /// the value found and what was expected. Runs before any file is loaded or written.
     pub fn validate(&self) -> Result<()> {
-        let bad = |f: &str, why: &str| Err(Error::Invalid(format!("config field {f}: {why}")));
-        if self.iterations == 0 {
-            return bad("iterations", "must be at least 1");
+        self.problem().map_err(Error::Invalid)
+    }
+
+    /// What [`TrainConfig::validate`] rejects, as a message.
+    fn problem(&self) -> std::result::Result<(), String> {
+        fn bad(
+            field: &str,
+            found: impl std::fmt::Display,
+            want: &str,
+        ) -> std::result::Result<(), String> {
+            Err(format!("config field {field} = {found}: expected {want}"))
         }
+        let at_least_1 = |field: &str, v: u32| {
+            if v == 0 {
+                bad(field, v, "at least 1")
+            } else {
+                Ok(())
+            }
+        };
+        let non_negative = |field: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                bad(field, v, "a finite value >= 0")
+            }
+        };
+        let unit = |field: &str, v: f64| {
+            if v.is_finite() && (0.0..=1.0).contains(&v) {
+                Ok(())
+            } else {
+                bad(field, v, "a value in [0, 1]")
+            }
+        };
+        at_least_1("iterations", self.iterations)?;
         if self.sh_degree > 3 {
-            return bad("sh_degree", "expected 0..=3");
+            bad("sh_degree", self.sh_degree, "0, 1, 2 or 3")?;
         }
-        if self.mlp_width == 0 || self.mlp_depth == 0 {
-            return bad("mlp_width/mlp_depth", "must be at least 1");
+        // Divisors of the schedules (`iteration % interval`).
+        at_least_1("sh_interval", self.sh_interval)?;
+        at_least_1("log_interval", self.log_interval)?;
+        at_least_1("checkpoint_interval", self.checkpoint_interval)?;
+        at_least_1("densify.interval", self.densify.interval)?;
+        at_least_1(
+            "densify.opacity_reset_interval",
+            self.densify.opacity_reset_interval,
+        )?;
+        at_least_1("pair_gap", self.pair_gap)?;
+        at_least_1("densify.budget", self.densify.budget)?;
+        if self.densify.budget > MAX_BUDGET {
+            bad(
+                "densify.budget",
+                self.densify.budget,
+                &format!("at most {MAX_BUDGET} (the kernels index floats with 32 bits)"),
+            )?;
         }
-        if !(0.0..=1.0).contains(&self.lambda_ssim) {
-            return bad("lambda_ssim", "expected a value in [0, 1]");
+        // The MLP kernels' limits (MlpConfig::validate), checked here to name the field.
+        if !(1..=64).contains(&self.mlp_depth) {
+            bad("mlp_depth", self.mlp_depth, "1..=64")?;
         }
-        if self.densify.budget == 0 {
-            return bad("densify.budget", "must be at least 1");
+        if !(1..=4096).contains(&self.mlp_width) {
+            bad("mlp_width", self.mlp_width, "1..=4096")?;
         }
-        if self.sh_interval == 0 || self.densify.interval == 0 || self.log_interval == 0 {
-            return bad(
-                "sh_interval/densify.interval/log_interval",
-                "must be at least 1",
-            );
+        unit("lambda_ssim", self.lambda_ssim as f64)?;
+        non_negative("motion_weight", self.motion_weight as f64)?;
+        let lr = &self.lr;
+        for (field, v) in [
+            ("lr.position_init", lr.position_init),
+            ("lr.position_final", lr.position_final),
+            ("lr.feature", lr.feature),
+            ("lr.opacity", lr.opacity),
+            ("lr.scaling", lr.scaling),
+            ("lr.rotation", lr.rotation),
+            ("lr.deform_init", lr.deform_init),
+            ("lr.deform_final", lr.deform_final),
+        ] {
+            non_negative(field, v)?;
         }
-        if !self.motion_weight.is_finite() || self.motion_weight < 0.0 {
-            return bad("motion_weight", "expected a finite value >= 0");
+        unit("lr.position_delay_mult", lr.position_delay_mult)?;
+        if !(lr.feature_rest_div.is_finite() && lr.feature_rest_div > 0.0) {
+            bad(
+                "lr.feature_rest_div",
+                lr.feature_rest_div,
+                "a finite value > 0 (a divisor)",
+            )?;
+        }
+        // Exponential schedules interpolate ln(rate): a single zero end gives ln(0)·0 = NaN.
+        for (name, a, b) in [
+            (
+                "lr.position_init/lr.position_final",
+                lr.position_init,
+                lr.position_final,
+            ),
+            (
+                "lr.deform_init/lr.deform_final",
+                lr.deform_init,
+                lr.deform_final,
+            ),
+        ] {
+            if (a == 0.0) != (b == 0.0) {
+                bad(
+                    name,
+                    format!("{a}/{b}"),
+                    "both > 0 (an exponential schedule), or both 0 (frozen)",
+                )?;
+            }
+        }
+        let d = &self.densify;
+        non_negative("densify.grad_threshold", d.grad_threshold as f64)?;
+        non_negative("densify.percent_dense", d.percent_dense as f64)?;
+        unit("densify.min_opacity", d.min_opacity as f64)?;
+        non_negative("densify.max_screen_size", d.max_screen_size as f64)?;
+        if crate::kernels::flow::FlowConfig::preset(&self.flow_preset).is_err() {
+            bad(
+                "flow_preset",
+                format!("{:?}", self.flow_preset),
+                "one of \"fast\", \"default\", \"accurate\"",
+            )?;
+        }
+        if self.motion_weight > 0.0
+            && self.motion_flow == MotionFlow::Oracle
+            && self.motion_order == MotionOrder::Reverse
+        {
+            bad(
+                "motion_flow",
+                "\"oracle\" with motion_order = \"reverse\"",
+                "motion_order = \"direct\" (the oracle gives the flow under the frame's own view)",
+            )?;
         }
         Ok(())
     }

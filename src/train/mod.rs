@@ -312,13 +312,29 @@ impl<'g> Trainer<'g> {
         })
     }
 
-    /// Restores a checkpoint written by a run with the same configuration.
+    /// Restores a checkpoint written by a run with the same configuration. Refuses, before
+    /// changing anything, a checkpoint of another configuration (SH degree, MLP size,
+    /// Gaussian budget: the message says which) or one holding a non-finite value (the
+    /// message names the blob).
     pub fn restore(&mut self, c: &Checkpoint) -> Result<()> {
-        self.model.restore(self.gpu, &c.model).map_err(|e| {
-            Error::Invalid(format!(
-                "checkpoint does not match this configuration ({e}); use the run's config.toml"
-            ))
-        })?;
+        self.model.check_snapshot(&c.model)?;
+        let n = c.model.gaussians.len();
+        for (name, v) in checkpoint::DENSIFY_STATS.iter().zip(&c.densify_stats) {
+            if v.len() != n {
+                return Err(Error::Invalid(format!(
+                    "blob {name}: {} floats; {n} Gaussians need {n}",
+                    v.len()
+                )));
+            }
+            let blob = crate::model::state::Blob {
+                name: name.to_string(),
+                data: v,
+                row: Some(1),
+                non_negative: true,
+            };
+            blob.check_values()?;
+        }
+        self.model.restore(self.gpu, &c.model)?;
         self.passes
             .densify
             .restore_stats(self.gpu, &c.densify_stats)?;
