@@ -220,4 +220,47 @@ fn adam_covers_more_than_65535_workgroups() {
         .all(|(i, x)| (x + if i % 2 == 0 { 0.5 } else { -0.5 }).abs() < 1e-6));
 }
 
+#[test]
+fn guarded_step_is_a_no_op_when_any_overflow_flag_is_set() {
+    let gpu = testing::gpu();
+    let adam = Adam::new(&gpu).unwrap();
+    let p0 = vec![1.0f32; 300];
+    let groups = [AdamGroup {
+        first: 0,
+        count: 300,
+        lr: 0.1,
+        mask: None,
+    }];
+    let h = AdamHyper::default();
+    // (flag, needed) pairs as the rasteriser writes them: a count alone never skips.
+    for (pairs, skipped) in [
+        (vec![0u32, 7, 0, 9], false),
+        (vec![0, 7, 1, 9], true),
+        (vec![1, 7, 0, 9], true),
+        (vec![0, 5], false),
+        (vec![3, 5], true),
+    ] {
+        let b = Bufs::new(&gpu, &p0);
+        gpu.upload(b.g.all(), &vec![0.5f32; 300]).unwrap();
+        let skip = gpu.buffer_from("skip pairs", &pairs).unwrap();
+        let mut rec = Recorder::new(&gpu).unwrap();
+        let pairs_slice = skip.slice(0, 4 * pairs.len() as u64);
+        adam.record_guarded(&mut rec, b.ab(), &groups, &h, 1, pairs_slice);
+        rec.finish().unwrap();
+        let [p, m, v] = b.read(&gpu, 300);
+        if skipped {
+            assert!(
+                p == p0 && m.iter().chain(&v).all(|&x| x == 0.0),
+                "{pairs:?}: updated"
+            );
+        } else {
+            assert!(
+                p.iter().all(|&x| (x - 0.9).abs() < 1e-5),
+                "{pairs:?}: not updated: {}",
+                p[0]
+            );
+        }
+    }
+}
+
 dispflow_vk::subgroup_reruns!();

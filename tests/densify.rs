@@ -636,8 +636,13 @@ fn stats_match_twin_over_views() {
             &opts,
             &upstream(33 + k as u64, px, 0),
         );
+        // A discarded (overflowed) step first: a set flag in the guard adds nothing.
+        let overflowed = gpu.buffer_from("overflow pairs", &[0u32, 9, 1, 9]).unwrap();
         let mut rec = Recorder::new(&gpu).unwrap();
-        dens.record_stats(&mut rec, &b, &rb, n as u32);
+        dens.record_stats(&mut rec, &b, &rb, n as u32, Some(overflowed.slice(0, 16)));
+        rec.finish().unwrap();
+        let mut rec = Recorder::new(&gpu).unwrap();
+        dens.record_stats(&mut rec, &b, &rb, n as u32, None);
         rec.finish().unwrap();
         let grad2d: Vec<f32> = gpu.read(rb.grad2d.elems::<f32>(0, 12 * n as u64)).unwrap();
         let splats: Vec<[f32; 4]> = gpu
@@ -728,7 +733,7 @@ fn stats_with_non_finite_gradients_stay_finite() {
     upload_stats(&gpu, &b, &want);
     for _ in 0..2 {
         let mut rec = Recorder::new(&gpu).unwrap();
-        dens.record_stats(&mut rec, &b, &rb, n as u32);
+        dens.record_stats(&mut rec, &b, &rb, n as u32, None);
         rec.finish().unwrap();
         twin::accumulate_stats(&mut want, &grad2d, &splats, w, h, n);
     }

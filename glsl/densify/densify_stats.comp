@@ -16,10 +16,14 @@ layout(std430, binding = 1) readonly buffer Splats { vec4 splats[]; };    // [N,
 layout(std430, binding = 2) buffer GradAccum { float grad_accum[]; };     // [capacity]
 layout(std430, binding = 3) buffer Denom { float denom[]; };              // [capacity]
 layout(std430, binding = 4) buffer MaxRadii { float max_radii[]; };       // [capacity]
+// pc.skip_flags (flag, needed) overflow pairs: a discarded (overflowed) step adds nothing.
+layout(std430, binding = 5) readonly buffer Skip { uint skip[]; };
 
 void main() {
     uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    if (i >= pc.num_gaussians) return;
+    bool skipped = false;
+    for (uint k = 0u; k < pc.skip_flags; ++k) skipped = skipped || skip[2u * k] != 0u;
+    if (i >= pc.num_gaussians || skipped) return;
     float radius = splats[3u * i + 1u].w;
     if (!(radius > 0.0)) return;
     float gx = grad2d[12u * i] * (0.5 * float(pc.width));

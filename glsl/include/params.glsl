@@ -132,7 +132,7 @@ struct AdamParams {
     float eps;
     float bc1;       // 1 − β1^t
     float bc2;       // 1 − β2^t
-    uint pad0;
+    uint skip_flags; // (flag, needed) pairs in `skip`; any non-zero flag makes the step a no-op
     uint pad1;
 };
 
@@ -192,7 +192,7 @@ struct DensifyStatsParams {
     uint num_gaussians;
     uint width;         // image size: ∂L/∂ndc = ∂L/∂pixel · (W/2, H/2)
     uint height;
-    uint pad;
+    uint skip_flags;    // (flag, needed) pairs in `skip`; any non-zero flag: add nothing
 };
 
 // src/kernels/densify.rs — densify step (grow, mark, count, write). Thresholds arrive

@@ -14,13 +14,16 @@ layout(std430, binding = 1) readonly buffer G { float g[]; };
 layout(std430, binding = 2) buffer M { float m[]; };
 layout(std430, binding = 3) buffer V { float v[]; };
 layout(std430, binding = 4) readonly buffer Mask { uint mask[]; };
-// skip[0] != 0 turns the whole update into a no-op: a training step whose tile intersections
+// skip holds pc.skip_flags (flag, needed) pairs as the rasteriser writes its overflow: any
+// non-zero flag turns the whole update into a no-op, so a training step one of whose renders
 // overflowed is discarded on the GPU (and re-run by the host) without a mid-step readback.
 layout(std430, binding = 5) readonly buffer Skip { uint skip[]; };
 
 void main() {
     uint j = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    if (j >= pc.count || skip[0] != 0u) return;
+    bool skipped = false;
+    for (uint k = 0u; k < pc.skip_flags; ++k) skipped = skipped || skip[2u * k] != 0u;
+    if (j >= pc.count || skipped) return;
     if (pc.use_mask != 0 && mask[j / pc.row_len] == 0u) return;
     uint i = pc.first + j;
     float gi = g[i];

@@ -240,6 +240,7 @@ impl Evaluator {
         loop {
             let mut rec = Recorder::new(gpu)?;
             self.record(&mut rec, model, view, v);
+            self.watch.publish(&mut rec);
             rec.finish()?;
             let (full, froz) = (self.watch.read(0), self.watch.read(1));
             if full.overflowed || (frozen && froz.overflowed) {

@@ -24,7 +24,7 @@ pub struct AdamParams {
     pub eps: f32,
     pub bc1: f32,
     pub bc2: f32,
-    pub pad0: u32,
+    pub skip_flags: u32,
     pub pad1: u32,
 }
 
@@ -71,11 +71,12 @@ impl Adam {
         h: &AdamHyper,
         step: u32,
     ) {
-        self.record_guarded(rec, b, groups, h, step, self.no_skip.slice(0, 4));
+        self.record_guarded(rec, b, groups, h, step, self.no_skip.slice(0, 8));
     }
 
-    /// As [`Adam::record`], but every update is a no-op when the u32 at `skip` is non-zero
-    /// (written earlier on the GPU, e.g. by the rasteriser's overflow check).
+    /// As [`Adam::record`], but every update is a no-op when any flag in `skip` is non-zero:
+    /// `skip` holds (flag, needed) u32 pairs as the rasteriser writes its overflow
+    /// ([`crate::kernels::raster::RasterBuffers::overflow_flag`]), written earlier on the GPU.
     pub fn record_guarded(
         &self,
         rec: &mut Recorder<'_>,
@@ -85,6 +86,10 @@ impl Adam {
         step: u32,
         skip: BufSlice<'_>,
     ) {
+        assert!(
+            skip.size >= 8 && skip.size % 8 == 0,
+            "adam skip {skip:?}: (flag, needed) pairs expected"
+        );
         let (bc1, bc2) = h.bias_corrections(step);
         rec.set_zone("adam");
         for g in groups {
@@ -106,6 +111,7 @@ impl Adam {
                 eps: h.eps,
                 bc1,
                 bc2,
+                skip_flags: (skip.size / 8) as u32,
                 ..Default::default()
             };
             let mask = g.mask.map_or(b.grads, |m| m.0);

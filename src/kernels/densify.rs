@@ -41,7 +41,7 @@ pub struct DensifyStatsParams {
     pub num_gaussians: u32,
     pub width: u32,
     pub height: u32,
-    pub pad: u32,
+    pub skip_flags: u32,
 }
 
 /// Mirrors `DensifyParams` in glsl/include/params.glsl (checked by tests/layout.rs). Built by
@@ -222,6 +222,8 @@ pub struct DensifyBuffers {
     offsets: Buffer,
     count: Buffer,
     scan: ScanScratch,
+    /// A cleared (flag, needed) pair: statistics without a guard.
+    no_skip: Buffer,
 }
 
 impl DensifyBuffers {
@@ -296,6 +298,7 @@ impl Densifier {
             offsets: gpu.buffer("densify offsets", c * 4)?,
             count: gpu.buffer("densify count", 256)?,
             scan: self.scan.scratch(gpu, capacity.max(1))?,
+            no_skip: gpu.buffer_from("densify no-skip", &[0u32; 2])?,
         };
         let mut rec = Recorder::new(gpu)?;
         self.record_clear_stats(&mut rec, &b);
@@ -311,14 +314,22 @@ impl Densifier {
     }
 
     /// Accumulates the statistics of the last rasteriser backward pass over `n` Gaussians
-    /// (`raster.grad2d` [N,12], `raster.splats` [N,3] vec4, image size from `raster`).
+    /// (`raster.grad2d` [N,12], `raster.splats` [N,3] vec4, image size from `raster`). Adds
+    /// nothing when a flag in `skip` ((flag, needed) u32 pairs, e.g. the step's render
+    /// overflows) is set; `None`: always add.
     pub fn record_stats(
         &self,
         rec: &mut Recorder<'_>,
         b: &DensifyBuffers,
         raster: &RasterBuffers,
         n: u32,
+        skip: Option<BufSlice<'_>>,
     ) {
+        let skip = skip.unwrap_or(b.no_skip.slice(0, 8));
+        assert!(
+            skip.size >= 8 && skip.size % 8 == 0,
+            "densify stats skip {skip:?}: (flag, needed) pairs expected"
+        );
         assert!(
             n <= b.capacity && n <= raster.max_gaussians,
             "densify stats: {n} Gaussians exceed the buffers ({} stats, {} raster)",
@@ -329,7 +340,7 @@ impl Densifier {
             num_gaussians: n,
             width: raster.width,
             height: raster.height,
-            pad: 0,
+            skip_flags: (skip.size / 8) as u32,
         };
         rec.dispatch_rows(
             &self.stats,
@@ -340,6 +351,7 @@ impl Densifier {
                 b.grad_accum.all(),
                 b.denom.all(),
                 b.max_radii.all(),
+                skip,
             ],
             n,
         );

@@ -34,7 +34,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             num_gaussians,
             width,
             height,
-            pad
+            skip_flags
         ),
         layout!(
             densify::DensifyParams,
@@ -210,7 +210,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             eps,
             bc1,
             bc2,
-            pad0,
+            skip_flags,
             pad1
         ),
         layout!(

@@ -192,18 +192,24 @@ impl<'g> Trainer<'g> {
             let (m, s) = (&self.model, &mut self.passes);
             step::record_step(&mut rec, &p, m, s, &self.frames, self.cfg.lambda_ssim);
             let timings = rec.finish()?;
+            // An overflowed render discarded the step on the GPU (no update, no statistics):
+            // grow what overflowed and run the step again, so no step ever learns from a
+            // truncated render and the result does not depend on the buffers' history.
             let s = &mut self.passes;
-            if let Some(m) = s.motion.as_mut().filter(|_| p.motion.is_some()) {
-                // A truncated intermediate render fed this step's flow (the optimiser step is
-                // guarded by the main render only); later steps get room for it.
-                let o = s.watch.read(1);
-                if o.overflowed {
-                    m.inter.grow(self.gpu, o.needed)?;
-                }
-            }
+            let mut again = false;
             let o = s.watch.read(0);
             if o.overflowed {
                 s.render.grow(self.gpu, o.needed)?;
+                again = true;
+            }
+            if let Some(m) = s.motion.as_mut().filter(|_| p.motion.is_some()) {
+                let o = s.watch.read(1);
+                if o.overflowed {
+                    m.inter.grow(self.gpu, o.needed)?;
+                    again = true;
+                }
+            }
+            if again {
                 continue;
             }
             self.iteration = p.iteration;

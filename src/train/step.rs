@@ -57,7 +57,8 @@ impl StepPasses {
 }
 
 /// Records iteration `p` into `rec`. Reads nothing back: the host learns about overflows
-/// from `s.watch` after the submit (the optimiser already skipped an overflowed step).
+/// from `s.watch` after the submit (the optimiser and the statistics already ignored an
+/// overflowed step, which the host re-runs with grown buffers).
 pub fn record_step(
     rec: &mut Recorder<'_>,
     p: &StepPlan,
@@ -121,14 +122,16 @@ pub fn record_step(
         }
     }
     rec.set_zone("densify stats");
-    if p.densify_stats {
-        s.densify.record_stats(rec, &s.render, g.n);
-    }
-    rec.set_zone("adam");
-    let skip = s.render.overflow_flag();
-    s.adam.record(rec, model, &p.lr, p.iteration, skip);
+    // An overflow of either render discards the step (the host grows and re-runs it).
     s.watch.record(rec, 0, &s.render);
     if let Some(m) = s.motion_of(p) {
         s.watch.record(rec, 1, &m.inter);
     }
+    let guard = s.watch.guard(1 + s.motion_of(p).is_some() as u64);
+    if p.densify_stats {
+        s.densify.record_stats(rec, &s.render, g.n, guard);
+    }
+    rec.set_zone("adam");
+    s.adam.record(rec, model, &p.lr, p.iteration, guard);
+    s.watch.publish(rec);
 }

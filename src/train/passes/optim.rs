@@ -25,7 +25,7 @@ impl AdamPass {
     }
 
     /// One Adam step of iteration `it` for every Gaussian section (and the MLP while it
-    /// trains), skipped on the GPU when `skip` (a render's overflow flag) is set.
+    /// trains), skipped on the GPU when a flag of `skip` (the step's render overflows) is set.
     pub fn record(
         &self,
         rec: &mut Recorder<'_>,
@@ -53,7 +53,6 @@ impl AdamPass {
             groups.push(group(Section::ShRest, lr.sh_rest));
         }
         groups.retain(|g| g.count > 0);
-        let skip = skip.buf.slice(skip.offset, 4);
         let bufs = AdamBuffers {
             params: g.params.all(),
             grads: g.grads.all(),
@@ -102,12 +101,17 @@ impl DensifyPass {
         })
     }
 
-    /// Accumulates the view-space gradient statistics of `render`'s last backward. (An
-    /// overflowed, discarded step adds its statistics once more; densification reads
-    /// averages, so one repeated view among hundreds is harmless.)
-    pub fn record_stats(&self, rec: &mut Recorder<'_>, render: &RenderPass, n: u32) {
+    /// Accumulates the view-space gradient statistics of `render`'s last backward, unless a
+    /// flag of `skip` is set (an overflowed step is discarded and re-run: it adds nothing).
+    pub fn record_stats(
+        &self,
+        rec: &mut Recorder<'_>,
+        render: &RenderPass,
+        n: u32,
+        skip: BufSlice<'_>,
+    ) {
         self.densifier
-            .record_stats(rec, &self.bufs, &render.bufs, n);
+            .record_stats(rec, &self.bufs, &render.bufs, n, Some(skip));
     }
 
     /// Clone/split/prune into the next generation and make it current (reads the new count

@@ -103,10 +103,13 @@ impl RenderPass {
     }
 }
 
-/// Copies the overflow flags of several renders out of one submit (host-visible), so the
-/// host learns after the step which renders must grow, without a mid-step read.
+/// The overflow flags of a step's renders: gathered on the GPU as (flag, needed) pairs, which
+/// guard the optimiser and the densification statistics (an overflowed step changes nothing),
+/// then published to host memory so the host learns after the submit which renders must grow
+/// before it re-runs the step. No mid-step read.
 pub struct OverflowWatch {
     flags: Buffer,
+    host: Buffer,
     slots: u64,
 }
 
@@ -120,7 +123,8 @@ pub struct Overflow {
 impl OverflowWatch {
     pub fn new(gpu: &Gpu, name: &str, slots: u64) -> Result<Self> {
         Ok(OverflowWatch {
-            flags: gpu.host_buffer(name, slots * 8)?,
+            flags: gpu.buffer(name, slots * 8)?,
+            host: gpu.host_buffer(&format!("{name} (host)"), slots * 8)?,
             slots,
         })
     }
@@ -131,18 +135,24 @@ impl OverflowWatch {
         rec.copy(pass.overflow_flag(), self.flags.slice(8 * k, 8));
     }
 
-    /// Slot `k` as of the last finished submit that recorded it.
+    /// Slots `0..count` as a skip guard (see `Adam::record_guarded`).
+    pub fn guard(&self, count: u64) -> BufSlice<'_> {
+        assert!((1..=self.slots).contains(&count));
+        self.flags.slice(0, 8 * count)
+    }
+
+    /// Copies every slot to host memory (the last command of a submit).
+    pub fn publish(&self, rec: &mut Recorder<'_>) {
+        rec.copy(self.flags.all(), self.host.all());
+    }
+
+    /// Slot `k` as of the last finished submit that recorded and published it.
     pub fn read(&self, k: u64) -> Overflow {
-        let w: Vec<u32> = self.flags.read_mapped();
+        let w: Vec<u32> = self.host.read_mapped();
         Overflow {
             overflowed: w[2 * k as usize] != 0,
             needed: w[2 * k as usize + 1],
         }
-    }
-
-    /// Clears every slot (before a submit that may not record all of them).
-    pub fn clear(&self, rec: &mut Recorder<'_>) {
-        rec.fill(self.flags.all(), 0);
     }
 }
 
