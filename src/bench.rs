@@ -1,6 +1,9 @@
 //! GPU-timed benchmark cases shared by `dispflow-vk bench` and the criterion benches.
 //! Times are sums of GPU timestamp deltas over the timed dispatches, never host wall time.
 //! Inputs are built once; every case verifies its first result against the CPU twin.
+//!
+//! Over 600 lines: every case (sort, scan, rasteriser) with its input builder and verification
+//! lives here so `dispflow-vk bench` and `cargo bench` time exactly the same code.
 
 use crate::error::{Error, Result};
 use crate::kernels::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};

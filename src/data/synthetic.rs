@@ -20,6 +20,9 @@
 //!
 //! Cameras have zero distortion and a slightly off-centre principal point; `scene.json`
 //! normalises with a non-trivial centre and scale. Everything is deterministic by seed.
+//!
+//! Over 600 lines: the primitives, their motion, the ray caster and the writer of every output
+//! file share one scene description; they split along those lines if the scene grows.
 
 use std::path::{Path, PathBuf};
 

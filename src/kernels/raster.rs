@@ -7,6 +7,9 @@
 //! pass on the GPU. Overflow of the intersection capacity is detected after the submit
 //! (`RasterBuffers::intersections`) and `render_checked` re-runs with grown buffers, so a splat
 //! is never dropped silently.
+//!
+//! Over 600 lines: one wrapper for the whole rasteriser family (sizes, buffers, forward,
+//! backward, the grow policy), because the passes share buffers and sort layout.
 
 use bytemuck::{Pod, Zeroable};
 

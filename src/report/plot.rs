@@ -1,5 +1,8 @@
 //! Line plots (loss / PSNR / metric curves against iteration) drawn straight into an RGB
 //! image with the bitmap font, so `eval` needs no plotting library or system fonts.
+//!
+//! Over 600 lines because axis ticks, labels, legend and clipping belong to one drawing routine;
+//! split it when a second plot type arrives.
 
 use image::{Rgb, RgbImage};
 use serde::Serialize;
