@@ -654,7 +654,7 @@ fn fp16_saturates_inputs_and_weights_beyond_65504_like_the_twin() {
         c.xyz[0] = 65520.0;
         c.xyz[1] = -1e5;
         let mut noise = Noise::new(90 + k as u64);
-        let mut big = |noise: &mut Noise| {
+        let big = |noise: &mut Noise| {
             let m = unif(noise, 1e5, 1e6);
             if noise.next_u32() % 2 == 0 {
                 m

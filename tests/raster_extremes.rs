@@ -1,9 +1,11 @@
 //! DESIGN §6 extremes through the GPU rasteriser, forward and backward: outputs and gradients
-//! stay finite, culling is exact, and saturating cases give the documented values.
+//! stay finite, culling is exact, and saturating cases give the documented values; and (second
+//! half) GPU against the CPU twin at the extremes, with tolerances.
 
 mod raster_common;
 
-use dispflow_vk::kernels::raster::{Rasterizer, RenderOpts};
+use dispflow_vk::kernels::raster::{Camera, Rasterizer, RenderOpts, G2D_STRIDE};
+use dispflow_vk::reference::raster as twin;
 use dispflow_vk::testing;
 use raster_common::*;
 
@@ -242,9 +244,6 @@ fn hundred_thousand_gaussians_in_one_tile() {
 //   quaternion gradients are measured against max(|dL/dq|, |s ⊙ dL/ds|) (both dL per radian
 //   or per unit of log-scale).
 
-use dispflow_vk::kernels::raster::{Camera, G2D_STRIDE};
-use dispflow_vk::reference::raster as twin;
-
 const OPTS: RenderOpts = RenderOpts {
     background: [0.2, 0.3, 0.4],
     alpha_max: 0.99,
@@ -339,9 +338,9 @@ fn twin_check(label: &str, scene: &Scene, cam: &Camera, opts: &RenderOpts, tol: 
         if !vis {
             continue;
         }
-        for d in 0..2 {
-            let w = proj.mean2d[i][d] as f64;
-            m.proj = m.proj.max((a[d] as f64 - w).abs() / w.abs().max(1.0));
+        for (g, w) in a[..2].iter().zip(proj.mean2d[i]) {
+            let w = w as f64;
+            m.proj = m.proj.max((*g as f64 - w).abs() / w.abs().max(1.0));
         }
         let w = proj.depth[i] as f64;
         m.proj = m.proj.max((a[2] as f64 - w).abs() / w.abs());
@@ -349,8 +348,8 @@ fn twin_check(label: &str, scene: &Scene, cam: &Camera, opts: &RenderOpts, tol: 
         let wc = proj.conic[i].map(f64::from);
         let e = (0..3).fold(0.0f64, |e, d| e.max((c[d] as f64 - wc[d]).abs()));
         m.proj = m.proj.max(e / max_abs(&wc));
-        for d in 0..3 {
-            m.proj = m.proj.max((col[d] - proj.color[i][d]).abs() as f64);
+        for (g, w) in col[..3].iter().zip(proj.color[i]) {
+            m.proj = m.proj.max((g - w).abs() as f64);
         }
     }
 
