@@ -754,3 +754,69 @@ fn hundred_thousand_in_one_tile_match_twin() {
     };
     twin_check("1e5 in one tile", &s, &cam, &OPTS, &tol);
 }
+
+#[test]
+fn degenerate_quaternions_near_plane_and_culling_match_twin() {
+    // Quaternions of norm 0, 1e-20, 1.4e-13 (identity, no gradient) and 1e-6 (normalised);
+    // means behind the camera, at the camera, 1 ulp before the near plane (culled), exactly on
+    // it and just past it (kept); then no Gaussians at all, and only culled ones.
+    let near = camera(24, 24).near;
+    let before = f32::from_bits(near.to_bits() - 1);
+    let s = scene_with(&[
+        ([0.0, 0.0, 3.0], [0.1, 0.3, 0.2], [0.0; 4], 1.0),
+        (
+            [0.3, 0.0, 3.0],
+            [0.1, 0.3, 0.2],
+            [1e-20, 0.0, 0.0, 0.0],
+            1.0,
+        ),
+        (
+            [-0.3, 0.0, 3.0],
+            [0.1, 0.3, 0.2],
+            [1e-13, -1e-13, 0.0, 1e-14],
+            1.0,
+        ),
+        ([0.0, 0.3, 3.0], [0.1, 0.3, 0.2], [1e-6, 0.0, 0.0, 0.0], 1.0),
+        (
+            [0.0, -0.3, 3.0],
+            [0.1, 0.3, 0.2],
+            [1e-6, 2e-7, 0.0, -3e-7],
+            1.0,
+        ),
+        ([0.0, 0.0, -3.0], [0.5; 3], ID, 2.0),
+        ([0.0, 0.0, 0.0], [0.5; 3], ID, 2.0),
+        ([0.0, 0.0, before], [0.01; 3], ID, 2.0),
+        ([0.0, 0.0, near], [0.001; 3], ID, 2.0),
+        ([0.001, 0.0, 1.1 * near], [0.002; 3], ID, 0.0),
+    ]);
+    // Measured: proj 1.7e-7, image 1.2e-7, grad_all 6.2e-7, grad_each 4.7e-6.
+    let tol = Tol {
+        proj: 2e-6,
+        image: 2e-6,
+        grad_all: 1e-5,
+        grad_each: 5e-5,
+        each_floor: 0.0,
+    };
+    twin_check("degenerate", &s, &camera(24, 24), &OPTS, &tol);
+    let empty = Scene {
+        sh_coeffs: 4,
+        sh_degree: 1,
+        feature_dims: 3,
+        ..Default::default()
+    };
+    // Nothing is drawn: background and zero gradients, bit for bit.
+    let zero = Tol {
+        proj: 0.0,
+        image: 0.0,
+        grad_all: 0.0,
+        grad_each: 0.0,
+        each_floor: 0.0,
+    };
+    twin_check("no Gaussians", &empty, &camera(17, 13), &OPTS, &zero);
+    let culled = scene_with(&[
+        ([0.0, 0.0, -1.0], [0.5; 3], ID, 2.0),
+        ([100.0, 0.0, 1.0], [0.01; 3], ID, 2.0),
+        ([0.0, -50.0, 2.0], [0.01; 3], ID, 2.0),
+    ]);
+    twin_check("all culled", &culled, &camera(17, 13), &OPTS, &zero);
+}
