@@ -1,7 +1,7 @@
 //! Deformation composition: GPU vs twin (forward and backward, with and without D), twin vs
 //! central finite differences, degenerate quaternions.
 
-use dispflow_vk::kernels::deform::{Canonical, DeformApply, Drawn};
+use dispflow_vk::kernels::deform::{Canonical, DeformApply, Drawn, LOG_SCALE_MAX};
 use dispflow_vk::reference::deform::{deform_apply, deform_apply_bwd};
 use dispflow_vk::testing::{self, Noise};
 use dispflow_vk::vk::Recorder;
@@ -62,20 +62,16 @@ fn twin_backward_matches_finite_differences() {
     }
 }
 
-#[test]
-fn gpu_matches_twin() {
+/// Runs forward and backward (with and without D) on the GPU for the given canonical
+/// parameters, MLP output and upstream gradients (`up`: drawn means [N,3], scales [N,3], rots
+/// [N,4]) and compares every output with the twin: `|gpu − twin| ≤ rel · (1 + |twin|)`, all
+/// finite. Returns the largest `|gpu − twin| / (1 + |twin|)`.
+fn compare(x: &[f32], s: &[f32], q: &[f32], d: &[f32], up: &[f32], rel: f64) -> f64 {
     let gpu = testing::gpu();
     let k = DeformApply::new(&gpu).unwrap();
-    let n = 1000usize;
-    let mut r = Noise::new(9);
-    let x = rand(&mut r, 3 * n, 2.0);
-    let s = rand(&mut r, 3 * n, 3.0);
-    let mut q = rand(&mut r, 4 * n, 1.0);
-    q[..4].copy_from_slice(&[0.0; 4]); // degenerate quaternion: identity, no gradient
-    let d = rand(&mut r, 10 * n, 0.1);
-    let up = rand(&mut r, 10 * n, 1.0);
+    let n = x.len() / 3;
     let b = |name: &str, v: &[f32]| gpu.buffer_from(name, v).unwrap();
-    let (xb, sb, qb, db) = (b("x", &x), b("s", &s), b("q", &q), b("d", &d));
+    let (xb, sb, qb, db) = (b("x", x), b("s", s), b("q", q), b("d", d));
     let (um, us, uq) = (
         b("um", &up[..3 * n]),
         b("us", &up[3 * n..6 * n]),
@@ -88,6 +84,7 @@ fn gpu_matches_twin() {
     for o in &out {
         testing::fill_noise(&gpu, o, 1);
     }
+    let mut worst = 0.0f64;
     for use_d in [false, true] {
         let c = Canonical {
             means: xb.all(),
@@ -125,25 +122,28 @@ fn gpu_matches_twin() {
             let f = |v: &[f32], w: usize| -> Vec<f64> {
                 v[w * i..w * i + w].iter().map(|&a| a as f64).collect()
             };
-            let dd: [f64; 10] = f(&d, 10).try_into().unwrap();
+            let dd: [f64; 10] = f(d, 10).try_into().unwrap();
             let (m, sc, rt) = deform_apply(
-                f(&x, 3).try_into().unwrap(),
-                f(&s, 3).try_into().unwrap(),
-                f(&q, 4).try_into().unwrap(),
+                f(x, 3).try_into().unwrap(),
+                f(s, 3).try_into().unwrap(),
+                f(q, 4).try_into().unwrap(),
                 use_d.then_some(&dd),
             );
             let (gx, gs, gq, gd) = deform_apply_bwd(
-                f(&s, 3).try_into().unwrap(),
-                f(&q, 4).try_into().unwrap(),
+                f(s, 3).try_into().unwrap(),
+                f(q, 4).try_into().unwrap(),
                 f(&up[..3 * n], 3).try_into().unwrap(),
                 f(&up[3 * n..6 * n], 3).try_into().unwrap(),
                 f(&up[6 * n..], 4).try_into().unwrap(),
             );
-            let check = |what: &str, g: &[f32], w: &[f64]| {
+            let mut check = |what: &str, g: &[f32], w: &[f64]| {
                 for (a, (gv, wv)) in g.iter().zip(w).enumerate() {
+                    let e = (*gv as f64 - wv).abs() / (1.0 + wv.abs());
+                    worst = worst.max(e);
                     assert!(
-                        (*gv as f64 - wv).abs() <= 1e-5 * (1.0 + wv.abs()),
-                        "{what}[{i}][{a}] gpu {gv} twin {wv} (deform {use_d})"
+                        gv.is_finite() && e <= rel,
+                        "{what}[{i}][{a}] gpu {gv} twin {wv} (log-scales {:?}, deform {use_d})",
+                        &s[3 * i..3 * i + 3]
                     );
                 }
             };
@@ -157,12 +157,85 @@ fn gpu_matches_twin() {
                 check("d deform", &got[6][10 * i..10 * i + 10], &gd);
             }
         }
-        assert_eq!(
-            &got[5][..4],
-            &[0.0; 4],
-            "degenerate quaternion gets no gradient"
-        );
+        if q[..4] == [0.0; 4] {
+            assert_eq!(
+                &got[5][..4],
+                &[0.0; 4],
+                "degenerate quaternion gets no gradient"
+            );
+        }
     }
+    worst
+}
+
+#[test]
+fn gpu_matches_twin() {
+    let n = 1000usize;
+    let mut r = Noise::new(9);
+    let x = rand(&mut r, 3 * n, 2.0);
+    let s = rand(&mut r, 3 * n, 3.0);
+    let mut q = rand(&mut r, 4 * n, 1.0);
+    q[..4].copy_from_slice(&[0.0; 4]); // degenerate quaternion: identity, no gradient
+    let d = rand(&mut r, 10 * n, 0.1);
+    let up = rand(&mut r, 10 * n, 1.0);
+    let e = compare(&x, &s, &q, &d, &up, 1e-5);
+    eprintln!("random: max |gpu − twin| / (1 + |twin|) = {e:.1e}");
+}
+
+#[test]
+fn log_scale_overflow_is_clamped_on_gpu_and_twin() {
+    // exp(log_scale) overflows f32 from 88.72 on; the composition clamps the log-scale at
+    // LOG_SCALE_MAX = 44 (a drawn scale of 1.3e19) and gives it no gradient above. Values on
+    // both sides of the clamp, at f32's exp overflow, up to f32::MAX and ±∞, with ds of either
+    // sign and random upstream gradients up to ±1e3 (g = ds·e^44 ≈ 1e22 stays finite).
+    assert_eq!(LOG_SCALE_MAX, 44.0);
+    let ls = [
+        -f32::INFINITY,
+        -1e30,
+        -104.0,
+        -88.0,
+        9.2,
+        43.9,
+        44.0,
+        44.1,
+        50.0,
+        88.0,
+        88.73,
+        89.0,
+        100.0,
+        1e30,
+        f32::MAX,
+        f32::INFINITY,
+    ];
+    let n = 64;
+    let mut r = Noise::new(10);
+    let x = rand(&mut r, 3 * n, 2.0);
+    let s: Vec<f32> = (0..3 * n).map(|i| ls[(i * 7) % ls.len()]).collect();
+    let q = rand(&mut r, 4 * n, 1.0);
+    let d = rand(&mut r, 10 * n, 1e3);
+    let up = rand(&mut r, 10 * n, 1e3);
+    // f32 exp's relative error grows with its argument (x·log2 e is rounded to an f32 near 63
+    // at x = 44: ≈ 1.3e-6 of the result, plus the device's exp2): measured 6.2e-6 (3.4e-7 for
+    // |x| ≤ 3 above); 5e-5 allowed.
+    let e = compare(&x, &s, &q, &d, &up, 5e-5);
+    eprintln!("log-scale extremes: max |gpu − twin| / (1 + |twin|) = {e:.1e}");
+    // Above the clamp: the drawn scale is e^44 + ds, the log-scale gradient exactly 0.
+    let (_, sc, _) = deform_apply(
+        [0.0; 3],
+        [89.0, f64::INFINITY, 44.0],
+        [1.0, 0.0, 0.0, 0.0],
+        None,
+    );
+    assert_eq!(sc[0], 44f64.exp());
+    assert_eq!(sc[1], 44f64.exp());
+    let (_, gs, _, _) = deform_apply_bwd(
+        [89.0, 44.0, -f64::INFINITY],
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0; 3],
+        [1.0; 3],
+        [0.0; 4],
+    );
+    assert_eq!(gs, [0.0, 44f64.exp(), 0.0]);
 }
 
 dispflow_vk::subgroup_reruns!();

@@ -160,3 +160,24 @@ fn forward_is_finite_at_extremes() {
     assert!(out.iter().all(|v| v.is_finite()));
     assert!(mlp::forward(&lay, &p, &[], Times::Batch(0.5)).is_empty());
 }
+
+#[test]
+fn f16_rounding_saturates_and_ties_to_even() {
+    use mlp::to_f16;
+    assert_eq!(to_f16(65504.0), 65504.0);
+    assert_eq!(to_f16(65519.0), 65504.0);
+    assert_eq!(to_f16(1e5), 65504.0, "saturates instead of overflowing");
+    assert_eq!(to_f16(-f64::INFINITY), -65504.0);
+    assert_eq!(to_f16(1.0 + 2f64.powi(-11)), 1.0, "tie to even");
+    assert_eq!(
+        to_f16(1.0 + 3.0 * 2f64.powi(-11)),
+        1.0 + 2f64.powi(-9),
+        "tie to even"
+    );
+    assert_eq!(to_f16(1000.3), 1000.5, "spacing 0.5 in [512, 1024)");
+    assert_eq!(to_f16(2f64.powi(-24)), 2f64.powi(-24), "smallest subnormal");
+    assert_eq!(to_f16(2f64.powi(-25)), 0.0, "tie to even (0)");
+    assert_eq!(to_f16(3.0 * 2f64.powi(-25)), 2f64.powi(-23));
+    assert_eq!(to_f16(-0.1), -0.0999755859375);
+    assert!(to_f16(f64::NAN).is_nan());
+}

@@ -663,6 +663,97 @@ fn fd_sh3_features() {
     check_fd(&random_scene(2, 40, 32, 20, 3, 16, 3), 12);
 }
 
+/// Needles and an edge-on disc (σ2 nearly singular, λ_max up to 1e10 px²): the twin's backward
+/// (taken in each Gaussian's frame, since ∂L/∂Σ2 = −C·G·C formed as a matrix is rounding noise
+/// along the long axis even in f64) against central differences of the f64 pipeline. Scales
+/// use a relative step (the long-axis gradient of the 1e4 disc is ~1e-11), quaternions and
+/// means an absolute 1e-8 (tilting the edge-on disc adds (2e4·δ)² px² to its thin 0.3 px²:
+/// with 1e-6 the curvature already biased the difference by 1e-4); scales below 1e-3 are not
+/// differenced (their effect on L is below f64's resolution of L).
+#[test]
+fn fd_needles_and_edge_on_disc() {
+    let mut s = Scene::empty(identity_camera(48, 40, 38.4), 1, 0);
+    s.params.background = [0.1, 0.2, 0.3];
+    let z45 = [0.923_879_5, 0.0, 0.0, 0.382_683_43];
+    let q = [0.9, 0.1, -0.3, 0.2];
+    s.push(
+        [-0.2, -0.1, 5.0],
+        [30.0, 1e-8, 1e-8],
+        z45,
+        1.0,
+        [0.9, 0.2, 0.1],
+    );
+    s.push(
+        [0.05, 0.0, 6.0],
+        [1e3, 1e-8, 1e-8],
+        z45,
+        0.5,
+        [0.2, 0.9, 0.1],
+    );
+    s.push([0.0, 0.0, 4.0], [1e4, 1e-8, 1e4], z45, 0.0, [0.1, 0.2, 0.9]);
+    s.push([-0.3, 0.2, 4.5], [1e-8, 1e4, 1.0], q, 0.5, [0.6, 0.6, 0.2]);
+    s.push([0.2, 0.1, 3.0], [2.0, 0.01, 0.3], q, -0.5, [0.3, 0.5, 0.7]);
+    let up = Upstream::random(&mut Pcg64::seed_from_u64(21), s.npix(), 0);
+    let g = Gaussians64::from_f32(&s.g());
+    let proj = project_f64(&s.cam, &g);
+    assert!(proj.radius.iter().all(|&r| r > 0), "all visible");
+    let bg = blend_bwd_f64(
+        &s.params,
+        &proj,
+        &[],
+        &up.rgb,
+        &up.alpha,
+        &up.depth,
+        &up.features,
+    );
+    let pg = project_bwd_f64(&s.cam, &g, &bg);
+    let (l0, sig0) = fd_loss(&s, &g, &[], &up, None);
+    let (mut checked, mut skipped) = (0, 0);
+    for i in 0..g.len() {
+        let mut params: Vec<(Kind, usize, f64, f64)> = vec![];
+        for a in 0..3 {
+            let sc = g.scales[i][a];
+            if sc >= 1e-3 {
+                params.push((Kind::Scales, 3 * i + a, 1e-3 * sc, pg.scales[i][a]));
+            }
+            params.push((Kind::Means, 3 * i + a, 1e-8, pg.means[i][a]));
+        }
+        for a in 0..4 {
+            params.push((Kind::Quats, 4 * i + a, 1e-8, pg.quats[i][a]));
+        }
+        for (kind, j, h, an) in params {
+            let eval = |delta: f64| {
+                let mut g2 = g.clone();
+                *param(&mut g2, &mut [], kind, j) += delta;
+                let detach = (kind == Kind::Means).then_some(&proj.color[..]);
+                fd_loss(&s, &g2, &[], &up, detach)
+            };
+            let ((lp, sp), (lm, sm)) = (eval(h), eval(-h));
+            if sp != sig0 || sm != sig0 {
+                skipped += 1;
+                continue;
+            }
+            checked += 1;
+            let fd = (lp - lm) / (2.0 * h);
+            // Rounding of L (~1e-16·|L| per evaluation) over 2h, with 100× headroom; the
+            // truncation error at these steps is below 1e-6 relative.
+            let abs = 1e-14 * (1.0 + l0.abs()) / h;
+            assert!(
+                (an - fd).abs() <= 1e-4 * fd.abs() + abs,
+                "Gaussian {i} {kind:?}[{j}]: analytic {an:e}, FD {fd:e} (step {h:e})"
+            );
+        }
+    }
+    eprintln!("needles FD: {checked} checked, {skipped} straddling");
+    assert!(
+        skipped * 10 <= checked,
+        "{skipped} straddle, {checked} checked"
+    );
+    // The disc's in-image long axis: a real, tiny gradient that the matrix form got wrong by
+    // 10³× with the opposite sign.
+    assert!(pg.scales[2][0].abs() < 1e-9 && pg.scales[2][0] != 0.0);
+}
+
 #[test]
 fn fd_sh1_of_16_features_small() {
     // Degree 1 active out of 16 stored coefficients: the unused ones get exactly zero gradient

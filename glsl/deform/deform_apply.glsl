@@ -1,5 +1,6 @@
-// Deformable-3DGS composition: mean = x + dx, scale = exp(s) + ds, rot = normalize(q) + dr
-// (the rasteriser normalises rot again). Body of deform_apply.comp (USE_DEFORM 1: reads the
+// Deformable-3DGS composition: mean = x + dx, scale = exp(min(s, LOG_SCALE_MAX)) + ds,
+// rot = normalize(q) + dr (the rasteriser normalises rot again). The clamp keeps a diverged
+// log-scale (≥ 88.7 overflows f32 exp) finite; see common.glsl. Body of deform_apply.comp (USE_DEFORM 1: reads the
 // MLP output) and deform_static.comp (USE_DEFORM 0: D ≡ 0, no MLP binding; the warm-up).
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
@@ -32,7 +33,8 @@ void main() {
 #endif
     for (uint a = 0; a < 3u; ++a) {
         out_means[3 * i + a] = means[3 * i + a] + dx[a];
-        out_scales[3 * i + a] = exp(log_scales[3 * i + a]) + ds[a];
+        float ls = log_scales[3 * i + a];
+        out_scales[3 * i + a] = exp(ls > LOG_SCALE_MAX ? LOG_SCALE_MAX : ls) + ds[a];
     }
     vec4 q = quats[i];
     float len = length(q);

@@ -28,7 +28,8 @@ void main() {
     for (uint a = 0; a < 3u; ++a) {
         float dm = d_means[3 * i + a], dsc = d_scales[3 * i + a];
         g_means[3 * i + a] = dm;
-        g_log_scales[3 * i + a] = dsc * exp(log_scales[3 * i + a]);
+        float ls = log_scales[3 * i + a];
+        g_log_scales[3 * i + a] = ls <= LOG_SCALE_MAX ? dsc * exp(ls) : 0.0; // 0 above the clamp
 #if USE_DEFORM
         d_deform[10 * i + a] = dm;
         d_deform[10 * i + 7 + a] = dsc;

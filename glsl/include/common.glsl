@@ -13,4 +13,10 @@
 #define SORT_BLOCK 2048
 #define SORT_RADIX 16
 
+// Deformation composition (glsl/deform): the drawn scale is exp(min(log_scale, LOG_SCALE_MAX))
+// + ds and the log-scale gets no gradient above the clamp. f32 exp overflows from 88.72 on; 44
+// is the largest integer whose exp still squares to a finite f32 (the rasteriser uses s²).
+// Mirrored in Rust: kernels::deform::LOG_SCALE_MAX.
+#define LOG_SCALE_MAX 44.0
+
 #endif

@@ -55,6 +55,14 @@ float sigmoid(float x) {
     return x >= 0.0 ? 1.0 / (1.0 + exp(-x)) : exp(x) / (1.0 + exp(x));
 }
 
+// sigmoid'(x) = e / (1 + e)², e = exp(−|x|): no cancellation, so it stays positive (≈ e^−|x|)
+// where σ(1 − σ) rounds to 0 in f32 (|x| ≳ 17). With Adam's ε = 1e-15 even a 1e-13 gradient
+// moves a saturated logit; an exact 0 would freeze it.
+float sigmoid_grad(float x) {
+    float e = exp(-abs(x));
+    return e / ((1.0 + e) * (1.0 + e));
+}
+
 const float SH_C0 = 0.28209479177387814;
 const float SH_C1 = 0.4886025119029199;
 const float SH_C2[5] = float[5](1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
@@ -89,6 +97,30 @@ void sh_basis(vec3 d, uint degree, out float b[16]) {
     b[15] = SH_C3[6] * x * (xx - 3.0 * yy);
 }
 
+float cross2(vec2 a, vec2 b) {
+    return a.x * b.y - a.y * b.x;
+}
+
+// adj(Σ2)·g = 0.3·g + Σ_{k≠skip} cross2(g, a_k)·(a_k.y, −a_k.x), so Σ2⁻¹·g = adj(Σ2)·g / det
+// without forming Σ2. With g = v_skip the skipped term is exactly zero (g ∥ a_skip), which is
+// what keeps Σ2⁻¹·v_k accurate along a needle's long axis (size 1/λ_max) in f32; skip = −1
+// keeps every term.
+vec2 adj_mul(vec2 a[3], vec2 g, int skip) {
+    vec2 r = DILATION * g;
+    for (int k = 0; k < 3; ++k)
+        if (k != skip) r += cross2(g, a[k]) * vec2(a[k].y, -a[k].x);
+    return r;
+}
+
+// σ = ½(a dx² + c dy²) + b dx dy ≥ 0 of a conic (a, b, c) at offset d = mean2d − pixel. The
+// conic is positive definite, so σ < 0 is rounding: a near-singular conic (a needle, whose
+// along-axis curvature is below f32's resolution of a, b, c) on its own spine. It is blended
+// as σ = 0 (α = opacity); skipping it (3DGS/gsplat) punched holes along a needle exactly where
+// it is densest. The backward passes σ's gradient through the clamp.
+float splat_sigma(vec3 con, vec2 d) {
+    return max(0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y, 0.0);
+}
+
 // Everything the forward projection computes that the backward needs again.
 struct Proj {
     bool visible;
@@ -99,9 +131,9 @@ struct Proj {
     mat3 Rq;         // rotation of the Gaussian
     vec4 qn;         // normalised quaternion
     float qlen;
-    mat3 M;          // Rq · diag(scale)
-    mat3 Sc;         // camera-space 3D covariance
     mat3 J;          // EWA Jacobian (third row zero)
+    vec2 v[3];       // image of the Gaussian's axis k per unit scale: (J·W·Rq[k]).xy
+    vec2 a[3];       // scale[k] · v[k]: Σ2 = Σ_k a_k a_kᵀ + 0.3·I
     vec3 cov2;       // dilated 2D covariance (xx, xy, yy)
     float det;
     vec3 conic;
@@ -122,9 +154,6 @@ Proj project_gaussian(ProjectParams pc, vec3 mean, vec3 scale, vec4 quat) {
     float fx = pc.intrinsics.x, fy = pc.intrinsics.y, cx = pc.intrinsics.z, cy = pc.intrinsics.w;
     r.qn = quat_normalize(quat, r.qlen);
     r.Rq = quat_to_mat(r.qn);
-    r.M = mat3(r.Rq[0] * scale.x, r.Rq[1] * scale.y, r.Rq[2] * scale.z);
-    mat3 S3 = r.M * transpose(r.M);
-    r.Sc = r.W * S3 * transpose(r.W);
     float z = r.p.z;
     float tanx = 0.5 * float(pc.width) / fx, tany = 0.5 * float(pc.height) / fy;
     float lxp = (float(pc.width) - cx) / fx + 0.3 * tanx, lxn = cx / fx + 0.3 * tanx;
@@ -136,9 +165,26 @@ Proj project_gaussian(ProjectParams pc, vec3 mean, vec3 scale, vec4 quat) {
     r.ty = z * clamp(uy, -lyn, lyp);
     r.J = mat3(vec3(fx / z, 0.0, 0.0), vec3(0.0, fy / z, 0.0),
                vec3(-fx * r.tx / (z * z), -fy * r.ty / (z * z), 0.0));
-    mat3 S2 = r.J * r.Sc * transpose(r.J);
-    r.cov2 = vec3(S2[0][0] + DILATION, S2[1][0], S2[1][1] + DILATION);
-    r.det = r.cov2.x * r.cov2.z - r.cov2.y * r.cov2.y;
+    // Σ2 = J·W·Rq·S²·Rqᵀ·Wᵀ·Jᵀ + 0.3·I = Σ_k a_k a_kᵀ + 0.3·I, kept in the Gaussian's own
+    // frame. The determinant is the Cauchy–Binet sum of non-negative terms,
+    //   det = 0.09 + 0.3·(xx + yy) + Σ_{j<k} cross2(a_j, a_k)²,
+    // where the textbook xx·yy − xy² cancels catastrophically in f32 for a (near-)singular Σ2
+    // (a needle, an edge-on disc, 1e-8 next to 1e4 in one Gaussian): it came out off by orders
+    // of magnitude or ≤ 0, culling or smearing visible Gaussians.
+    mat3 TW = r.J * r.W;
+    for (int k = 0; k < 3; ++k) {
+        r.v[k] = (TW * r.Rq[k]).xy;
+        r.a[k] = scale[k] * r.v[k];
+    }
+    float xx = 0.0, xy = 0.0, yy = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        xx += r.a[k].x * r.a[k].x;
+        xy += r.a[k].x * r.a[k].y;
+        yy += r.a[k].y * r.a[k].y;
+    }
+    float c01 = cross2(r.a[0], r.a[1]), c02 = cross2(r.a[0], r.a[2]), c12 = cross2(r.a[1], r.a[2]);
+    r.cov2 = vec3(xx + DILATION, xy, yy + DILATION);
+    r.det = DILATION * DILATION + DILATION * (xx + yy) + (c01 * c01 + c02 * c02 + c12 * c12);
     if (!(r.det > 0.0) || isinf(r.det)) return r;
     r.conic = vec3(r.cov2.z, -r.cov2.y, r.cov2.x) / r.det;
     r.mean2d = vec2(fx * r.p.x / z + cx, fy * r.p.y / z + cy);

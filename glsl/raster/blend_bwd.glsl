@@ -3,7 +3,8 @@
 // "behind" terms R (what lies behind splat i, per unit of T_{i+1}; for colour the background
 // is the last layer) by R ← f_i α_i + (1 − α_i) R. Then for each blended output o = Σ f_i w_i:
 //   ∂o/∂f_i = w_i,   ∂o/∂α_i = T_i (f_i − R_i)   (alpha output: f = 1, depth: f = z).
-// Where α was clamped to alpha_max its derivative is zero.
+// Where α was clamped to alpha_max its derivative is zero. The σ ≥ 0 clamp of splat_sigma
+// only removes rounding, so σ's gradient passes through it unchanged.
 //
 // Accumulation scheme: per splat in the batch, each invocation (pixel) computes its terms, a
 // subgroupAdd folds them within the subgroup and one lane adds the sum to the splat's gradient
@@ -96,10 +97,10 @@ void main() {
             vec4 a = s_a[k];
             vec3 con = s_b[k].xyz;
             vec2 d = a.xy - centre;
-            float sigma = 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
+            float sigma = splat_sigma(con, d);
             float g = a.w * exp(-sigma);
             float alpha = min(pc.alpha_max, g);
-            bool live = inside && rel < last && sigma >= 0.0 && alpha >= ALPHA_MIN;
+            bool live = inside && rel < last && alpha >= ALPHA_MIN;
             if (!subgroupAny(live)) continue;
 
             vec2 g_mean = vec2(0.0);

@@ -71,8 +71,7 @@ void main() {
             vec4 a = s_a[k];
             vec3 con = s_b[k].xyz;
             vec2 d = a.xy - centre;
-            float sigma = 0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) + con.y * d.x * d.y;
-            if (sigma < 0.0) continue;
+            float sigma = splat_sigma(con, d);
             float alpha = min(pc.alpha_max, a.w * exp(-sigma));
             if (alpha < ALPHA_MIN) continue;
             float test_t = T * (1.0 - alpha);

@@ -1,8 +1,9 @@
 #version 460
 // Backward of `project`: from the per-splat 2D gradients that blend_bwd accumulated (mean2d,
 // conic, opacity, colour, depth) to the 3D parameters. Recomputes the forward (cheaper than
-// storing ~40 floats per Gaussian). Chain: conic = Σ2⁻¹ → Σ2 = J·Σc·Jᵀ + 0.3·I → Σc = W·Σ3·Wᵀ
-// → Σ3 = M·Mᵀ, M = R(q̂)·diag(s) → q̂ = q/|q|; mean through p = W·mean + t into mean2d, J (with
+// storing ~40 floats per Gaussian). Chain: conic = Σ2⁻¹ → Σ2 = J·W·R(q̂)·S²·R(q̂)ᵀ·Wᵀ·Jᵀ + 0.3·I
+// (taken in the Gaussian's own frame, see below) → q̂ = q/|q|, s; mean through p = W·mean + t
+// into mean2d, J (with
 // the 1.3×fov clamp: a clamped coordinate passes no gradient to x or y, only through z) and
 // depth. The SH view direction is detached, as in 3DGS/gsplat. Culled Gaussians get zeros.
 #extension GL_GOOGLE_include_directive : require
@@ -86,29 +87,44 @@ void main() {
     vec3 g_raw = g_col * vec3(greaterThan(raw, vec3(0.0)));
     for (uint k = 0; k < pc.sh_coeffs; ++k) write_dsh(i, k, k < nb ? b[k] * g_raw : vec3(0.0));
 
-    float s = sigmoid(logits[i]);
-    d_logits[i] = g_op * s * (1.0 - s);
+    d_logits[i] = g_op * sigmoid_grad(logits[i]);
 
-    // conic = Σ2⁻¹: ∂L/∂Σ2 = −Σ2⁻¹·G·Σ2⁻¹ with G the symmetric gradient (b appears twice).
-    mat2 Ci = mat2(r.conic.x, r.conic.y, r.conic.y, r.conic.z);
+    // conic = Σ2⁻¹, G the symmetric gradient (b appears twice): ∂L/∂Σ2 = −C·G·C. Formed as a
+    // matrix in f32, C loses its smallest eigenvalue 1/λ_max (a needle's length) and every
+    // gradient along the long axis came out as rounding noise, orders of magnitude too large.
+    // So stay in the Gaussian's frame (a_k = s_k v_k, Σ2 = Σ_k a_k a_kᵀ + 0.3·I) with
+    // w_k = C·v_k from adj_mul, whose self term cancels exactly:
+    //   Q_jk = −w_jᵀ G w_k,  ∂L/∂s_k = 2 s_k Q_kk,  ∂L/∂Rq[k] = 2 s_k² Σ_j Q_jk Rq[j],
+    //   ∂L/∂J = −2 Σ_k s_k² (C·G·w_k)(W·Rq[k])ᵀ,  ⟨∂L/∂J, J⟩ = 2 Σ_k s_k² Q_kk.
     mat2 G = mat2(g_con.x, 0.5 * g_con.y, 0.5 * g_con.y, g_con.z);
-    mat2 gS2 = -(Ci * G * Ci);
-    mat3 gS2m = mat3(vec3(gS2[0], 0.0), vec3(gS2[1], 0.0), vec3(0.0));
-    mat3 gSc = transpose(r.J) * gS2m * r.J;
-    mat3 gJ = 2.0 * gS2m * r.J * r.Sc;
-    mat3 gS3 = transpose(r.W) * gSc * r.W;
-    mat3 gM = 2.0 * gS3 * r.M;
-    vec3 d_scale = vec3(dot(gM[0], r.Rq[0]), dot(gM[1], r.Rq[1]), dot(gM[2], r.Rq[2]));
-    mat3 gR = mat3(gM[0] * scale.x, gM[1] * scale.y, gM[2] * scale.z);
+    vec2 w[3];
+    for (int k = 0; k < 3; ++k) w[k] = adj_mul(r.a, r.v[k], k) / r.det;
+    mat3 Q;
+    for (int j = 0; j < 3; ++j)
+        for (int k = 0; k < 3; ++k) Q[j][k] = -dot(w[j], G * w[k]);
+    vec3 s2 = scale * scale;
+    vec3 d_scale = 2.0 * scale * vec3(Q[0][0], Q[1][1], Q[2][2]);
+    mat3 gR; // column k = ∂L/∂Rq[k]
+    for (int k = 0; k < 3; ++k)
+        gR[k] = 2.0 * s2[k] * (Q[0][k] * r.Rq[0] + Q[1][k] * r.Rq[1] + Q[2][k] * r.Rq[2]);
     vec4 gq = quat_to_mat_grad(r.qn, gR);
     d_quats[i] = r.qlen > 1e-12 ? (gq - r.qn * dot(r.qn, gq)) / r.qlen : vec4(0.0);
+    // The third column of ∂L/∂J (math indices), which carries tx and ty.
+    float gJ02 = 0.0, gJ12 = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        vec2 h = adj_mul(r.a, G * w[k], -1) / r.det;
+        float uz = (r.W * r.Rq[k]).z;
+        gJ02 -= 2.0 * s2[k] * h.x * uz;
+        gJ12 -= 2.0 * s2[k] * h.y * uz;
+    }
+    float gJJ = 2.0 * dot(s2, vec3(Q[0][0], Q[1][1], Q[2][2]));
 
     // Camera-space mean: mean2d, Jacobian (math entries J_ab = J[b][a]) and depth.
     float fx = pc.intrinsics.x, fy = pc.intrinsics.y;
     float z = r.p.z, z2 = z * z, z3 = z2 * z;
     vec3 g_p = vec3(g_m2.x * fx / z, g_m2.y * fy / z, -(g_m2.x * fx * r.p.x + g_m2.y * fy * r.p.y) / z2);
-    float gJ00 = gJ[0][0], gJ02 = gJ[2][0], gJ11 = gJ[1][1], gJ12 = gJ[2][1];
-    g_p.z += -(gJ00 * fx + gJ11 * fy) / z2 + 2.0 * (gJ02 * fx * r.tx + gJ12 * fy * r.ty) / z3;
+    // ∂J/∂z at fixed tx, ty is −J/z + (third column fx·tx/z³, fy·ty/z³).
+    g_p.z += -gJJ / z + (gJ02 * fx * r.tx + gJ12 * fy * r.ty) / z3;
     float g_tx = -gJ02 * fx / z2, g_ty = -gJ12 * fy / z2;
     // tx = x unclamped; tx = z·limit when clamped (then ∂tx/∂z = tx / z).
     if (r.clamp_x) g_p.z += g_tx * r.tx / z; else g_p.x += g_tx;

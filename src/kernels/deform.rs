@@ -1,5 +1,5 @@
 //! Composition of canonical Gaussians with the deformation (`glsl/deform/*.comp`); CPU twin:
-//! `reference::deform`. Deformable-3DGS: mean = x + dx, scale = exp(s) + ds,
+//! `reference::deform`. Deformable-3DGS: mean = x + dx, scale = exp(min(s, LOG_SCALE_MAX)) + ds,
 //! rot = normalize(q) + dr. During warm-up (`deform = None`) D ≡ 0 and nothing is read.
 
 use bytemuck::{Pod, Zeroable};
@@ -7,6 +7,12 @@ use bytemuck::{Pod, Zeroable};
 use crate::error::Result;
 use crate::shaders;
 use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
+
+/// Log-scales above this are clamped before `exp` (mirrors `LOG_SCALE_MAX` in
+/// glsl/include/common.glsl): f32 `exp` overflows from 88.72 on, and 44 is the largest integer
+/// whose `exp` still squares to a finite f32 (the rasteriser builds Σ from s²). Far above any
+/// scene (a scale of 1e4 is a log-scale of 9.2); the log-scale gets no gradient above it.
+pub const LOG_SCALE_MAX: f32 = 44.0;
 
 /// Mirrors `DeformParams` in glsl/include/params.glsl (checked by tests/layout.rs).
 #[repr(C)]

@@ -1,5 +1,16 @@
-//! Twin of `glsl/deform/*`: mean = x + dx, scale = exp(s) + ds, rot = normalize(q) + dr, and
-//! its backward (f64).
+//! Twin of `glsl/deform/*`: mean = x + dx, scale = exp(min(s, LOG_SCALE_MAX)) + ds,
+//! rot = normalize(q) + dr, and its backward (f64; no gradient to s above the clamp).
+
+use crate::kernels::deform::LOG_SCALE_MAX;
+
+/// The log-scale `exp` is taken of: clamped at `LOG_SCALE_MAX` (NaN stays NaN, as on the GPU).
+fn clamp_log_scale(s: f64) -> f64 {
+    if s > LOG_SCALE_MAX as f64 {
+        LOG_SCALE_MAX as f64
+    } else {
+        s
+    }
+}
 
 /// Drawn (mean, scale, rot) of one Gaussian.
 pub fn deform_apply(
@@ -18,7 +29,7 @@ pub fn deform_apply(
     };
     (
         [0, 1, 2].map(|a| x[a] + d[a]),
-        [0, 1, 2].map(|a| s[a].exp() + d[7 + a]),
+        [0, 1, 2].map(|a| clamp_log_scale(s[a]).exp() + d[7 + a]),
         [0, 1, 2, 3].map(|a| qn[a] + d[3 + a]),
     )
 }
@@ -43,5 +54,12 @@ pub fn deform_apply_bwd(
     dd[..3].copy_from_slice(&dm);
     dd[3..7].copy_from_slice(&dq);
     dd[7..].copy_from_slice(&ds);
-    (dm, [0, 1, 2].map(|a| ds[a] * s[a].exp()), gq, dd)
+    let gs = [0, 1, 2].map(|a| {
+        if s[a] <= LOG_SCALE_MAX as f64 {
+            ds[a] * s[a].exp()
+        } else {
+            0.0
+        }
+    });
+    (dm, gs, gq, dd)
 }

@@ -82,19 +82,33 @@ struct Row {
     out: Vec<f64>,
 }
 
-fn forward_row(lay: &MlpLayout, p: &[f64], x: [f32; 3], t: f32) -> Row {
+/// `store` is applied to every value the network keeps between layers (the encoding, hidden
+/// activations, time features; not the output): the identity for the f64 twin, f16 rounding
+/// for the fp16 one.
+fn forward_row(
+    lay: &MlpLayout,
+    p: &[f64],
+    x: [f32; 3],
+    t: f32,
+    store: impl Fn(f64) -> f64 + Copy,
+) -> Row {
     let cfg = &lay.cfg;
+    let keep = |v: &mut Vec<f64>| v.iter_mut().for_each(|a| *a = store(*a));
     let mut x0 = Vec::with_capacity(cfg.in_dims());
     encode_x(&x.map(f64::from), cfg.x_freqs, &mut x0);
+    keep(&mut x0);
     let mut enc_t = Vec::new();
     encode_scalar(t as f64, cfg.t_freqs(), &mut enc_t);
+    keep(&mut enc_t);
     let mut ht = Vec::new();
     if cfg.time_net() {
         let tn = lay.time_net();
         ht = vec![0.0; tn[0].fan_out];
         linear(&tn[0], p, &enc_t, true, &mut ht);
+        keep(&mut ht);
         let mut tf = vec![0.0; tn[1].fan_out];
         linear(&tn[1], p, &ht, false, &mut tf);
+        keep(&mut tf);
         x0.extend_from_slice(&tf);
     } else {
         x0.extend_from_slice(&enc_t);
@@ -116,6 +130,7 @@ fn forward_row(lay: &MlpLayout, p: &[f64], x: [f32; 3], t: f32) -> Row {
         };
         let mut y = vec![0.0; w];
         linear(l, p, input, true, &mut y);
+        keep(&mut y);
         h.push(y);
     }
     let mut out = vec![0.0; OUT_DIMS];
@@ -142,6 +157,7 @@ pub fn forward_f64(lay: &MlpLayout, params: &[f64], xyz: &[f32], times: Times<'_
                 params,
                 [xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]],
                 times.at(i),
+                |v| v,
             )
         })
         .collect();
@@ -169,6 +185,39 @@ pub fn forward(lay: &MlpLayout, params: &[f32], xyz: &[f32], times: Times<'_>) -
         .out
         .iter()
         .map(|&v| v as f32)
+        .collect()
+}
+
+/// Largest finite f16, the saturation bound of the fp16 path.
+pub const F16_MAX: f64 = 65504.0;
+
+/// f16 storage as the fp16 kernels do it (`float16_t(clamp(v, −65504, 65504))`): saturate at
+/// ±65504 instead of overflowing to ±∞, then round to nearest even with 11 significant bits
+/// (subnormals below 2⁻¹⁴ keep spacing 2⁻²⁴). NaN stays NaN.
+pub fn to_f16(v: f64) -> f64 {
+    let v = v.clamp(-F16_MAX, F16_MAX);
+    if v == 0.0 || v.is_nan() {
+        return v;
+    }
+    let e = ((v.abs().to_bits() >> 52) as i64 - 1023).max(-14);
+    let ulp = (2.0f64).powi(e as i32 - 10);
+    (v / ulp).round_ties_even() * ulp
+}
+
+/// Twin of the fp16-storage fused forward (`glsl/mlp/fused_fwd_f16.comp`): the weights and
+/// every stored value (encoding, hidden activations, time features) pass through [`to_f16`],
+/// arithmetic is f64, the `[N][10]` outputs are not rounded (the kernel writes them as f32).
+/// So inputs, weights and activations beyond ±65504 saturate exactly as on the GPU.
+pub fn forward_f16(lay: &MlpLayout, params: &[f32], xyz: &[f32], times: Times<'_>) -> Vec<f64> {
+    assert!(params.len() >= lay.total);
+    let p: Vec<f64> = params.iter().map(|&v| to_f16(v as f64)).collect();
+    let n = xyz.len() / 3;
+    (0..n)
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            let x = [xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]];
+            forward_row(lay, &p, x, times.at(i), to_f16).out
+        })
         .collect()
 }
 

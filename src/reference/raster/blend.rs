@@ -18,8 +18,8 @@ pub struct BlendOut64 {
     pub features: Vec<f64>,
     pub final_t: Vec<f64>,
     pub n_contrib: Vec<u32>,
-    /// Hash of every discrete decision of the blend (per pixel and considered Gaussian: skipped
-    /// for σ < 0, skipped for α < 1/255, blended, blended with α clamped, stop). Equal signatures
+    /// Hash of every discrete decision of the blend (per pixel and considered Gaussian: σ < 0
+    /// clamped to 0, skipped for α < 1/255, blended, blended with α clamped, stop). Equal signatures
     /// mean the same smooth piece; used by finite-difference tests to detect straddles.
     pub signature: u64,
 }
@@ -68,10 +68,12 @@ fn walk_pixel(
         let [a, b, c] = proj.conic[i];
         let dx = proj.mean2d[i][0] - cx;
         let dy = proj.mean2d[i][1] - cy;
-        let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
-        if sigma < 0.0 {
+        // σ ≥ 0 for a positive-definite conic: a negative value is rounding of a near-singular
+        // one (a needle on its own spine) and is blended as σ = 0, its gradient passed through.
+        let sigma_raw = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+        let sigma = sigma_raw.max(0.0);
+        if sigma_raw < 0.0 {
             (i, 0u8).hash(sig);
-            continue;
         }
         let gauss = (-sigma).exp();
         let raw = proj.opacity[i] * gauss;
@@ -118,7 +120,7 @@ fn check_inputs(p: &BlendParams, proj: &Projected64, features: usize) {
 }
 
 /// Blends every pixel (see the module docs). `features` is `[N][K]`, K = `p.feature_dims`.
-/// Per pixel: `d = mean2d − (px+0.5, py+0.5)`, `σ = ½(a dx² + c dy²) + b dx dy` (skip if < 0),
+/// Per pixel: `d = mean2d − (px+0.5, py+0.5)`, `σ = max(½(a dx² + c dy²) + b dx dy, 0)`,
 /// `α = min(alpha_max, o·exp(−σ))` (skip if < 1/255), stop without blending if `T(1−α) < 1e-4`,
 /// else `w = αT` weights colour, depth and features and `T ← T(1−α)`; finally `rgb += T·bg`.
 pub fn blend_fwd(p: &BlendParams, proj: &Projected, features: &[f32]) -> BlendOut {

@@ -18,7 +18,9 @@
 //! - EWA projection with the Jacobian's `x/z`, `y/z` clamped to 1.3× the half-fov (gsplat's
 //!   asymmetric limits for an off-centre principal point), 2D covariance dilated by `0.3·I`;
 //! - colour `max(SH(dir) + 0.5, 0)` with the view direction detached; opacity `sigmoid(logit)`;
-//! - front-to-back blending with `α = min(alpha_max, o·exp(−σ))`, skip `σ < 0` or `α < 1/255`,
+//! - front-to-back blending with `α = min(alpha_max, o·exp(−σ))`, `σ` clamped at 0 from below
+//!   (a negative σ is rounding of a near-singular conic; gsplat skips such a pixel), skip
+//!   `α < 1/255`,
 //!   stop (without blending) when the transmittance would drop below `1e-4`.
 
 // Index loops on purpose: they read like the GLSL they define.

@@ -11,26 +11,8 @@ use crate::reference::sh;
 
 type M3 = [[f64; 3]; 3];
 
-fn mat3_mul(a: &M3, b: &M3) -> M3 {
-    let mut c = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            for k in 0..3 {
-                c[i][j] += a[i][k] * b[k][j];
-            }
-        }
-    }
-    c
-}
-
-fn transpose(a: &M3) -> M3 {
-    let mut t = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            t[i][j] = a[j][i];
-        }
-    }
-    t
+fn cross2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    a[0] * b[1] - a[1] * b[0]
 }
 
 /// Rotation matrix of a unit quaternion (w, x, y, z); `r[row][col]`.
@@ -97,17 +79,18 @@ struct Fwd {
     /// Normalised quaternion and the norm it was divided by (0 when replaced by identity).
     qn: [f64; 4],
     qnorm: f64,
-    /// R(q̂), M = R·diag(s), Σ3 = M Mᵀ.
+    /// R(q̂).
     r: M3,
-    m: M3,
-    sigma3: M3,
     /// The clamped x/z, y/z and whether the clamp was active.
     txz: f64,
     tyz: f64,
     clamp_x: bool,
     clamp_y: bool,
-    /// T = J · rot (2×3).
-    t: [[f64; 3]; 2],
+    /// The image of the Gaussian's axis k per unit scale, `v_k = T·R_k` with T = J·rot, and
+    /// `a_k = s_k·v_k`: Σ2 = Σ_k a_k a_kᵀ + 0.3·I.
+    v: [[f64; 2]; 3],
+    a: [[f64; 2]; 3],
+    det: f64,
     conic: [f64; 3],
     mean2d: [f64; 2],
     radius: u32,
@@ -158,7 +141,7 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
         return None;
     }
 
-    // 2. Σ3 = R S Sᵀ Rᵀ.
+    // 2. Rotation of the Gaussian.
     let q = g.quats[i];
     let qnorm = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
     let (qn, qnorm) = if qnorm < QUAT_EPS || !qnorm.is_finite() {
@@ -168,13 +151,6 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
     };
     let r = quat_to_rot(qn);
     let s = g.scales[i];
-    let mut m = [[0.0; 3]; 3];
-    for a in 0..3 {
-        for b in 0..3 {
-            m[a][b] = r[a][b] * s[b];
-        }
-    }
-    let sigma3 = mat3_mul(&m, &transpose(&m));
 
     // 3. Jacobian with clamped x/z, y/z.
     let (fx, fy, cx, cy) = (cam.fx as f64, cam.fy as f64, cam.cx as f64, cam.cy as f64);
@@ -203,23 +179,31 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
             }
         }
     }
-    // Σ2 = T Σ3 Tᵀ + 0.3 I.
-    let mut sigma2 = [[0.0; 2]; 2];
-    for a in 0..2 {
-        for b in 0..2 {
-            for k in 0..3 {
-                for l in 0..3 {
-                    sigma2[a][b] += t[a][k] * sigma3[k][l] * t[b][l];
-                }
-            }
+    // Σ2 = T·R·S²·Rᵀ·Tᵀ + 0.3 I = Σ_k a_k a_kᵀ + 0.3 I, a_k = s_k·T·R_k (R_k: column k of R).
+    let mut v = [[0.0; 2]; 3];
+    for (k, vk) in v.iter_mut().enumerate() {
+        for row in 0..2 {
+            vk[row] = (0..3).map(|l| t[row][l] * r[l][k]).sum();
         }
     }
-    sigma2[0][0] += DILATION;
-    sigma2[1][1] += DILATION;
-    let s01 = 0.5 * (sigma2[0][1] + sigma2[1][0]);
+    let a: [[f64; 2]; 3] = std::array::from_fn(|k| [s[k] * v[k][0], s[k] * v[k][1]]);
+    let (mut xx, mut xy, mut yy) = (0.0, 0.0, 0.0);
+    for ak in &a {
+        xx += ak[0] * ak[0];
+        xy += ak[0] * ak[1];
+        yy += ak[1] * ak[1];
+    }
+    let sigma2 = [[xx + DILATION, xy], [xy, yy + DILATION]];
+    let s01 = xy;
 
-    // 4. conic.
-    let det = sigma2[0][0] * sigma2[1][1] - s01 * s01;
+    // 4. conic. det Σ2 as the Cauchy–Binet sum of non-negative terms,
+    // det = 0.09 + 0.3·(xx + yy) + Σ_{j<k} cross2(a_j, a_k)², like the GPU: the textbook
+    // xx·yy − xy² cancels catastrophically for a near-singular Σ2 (in f32 already for a
+    // needle a few hundred pixels long).
+    let c = |j: usize, k: usize| cross2(a[j], a[k]);
+    let det = DILATION * DILATION
+        + DILATION * (xx + yy)
+        + (c(0, 1).powi(2) + c(0, 2).powi(2) + c(1, 2).powi(2));
     if !det.is_finite() || det <= 0.0 {
         return None;
     }
@@ -267,13 +251,13 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
         qn,
         qnorm,
         r,
-        m,
-        sigma3,
         txz,
         tyz,
         clamp_x,
         clamp_y,
-        t,
+        v,
+        a,
+        det,
         conic,
         mean2d,
         radius,
@@ -383,58 +367,68 @@ fn project_bwd_impl(
         let [x, y, z] = f.p;
         let mut dp = [0.0; 3];
 
-        // Conic = Σ2⁻¹: dΣ2 = −C · dC · C with dC symmetric (b appears twice in the matrix).
-        let [a, b, c] = f.conic;
-        let con = [[a, b], [b, c]];
+        // Conic = Σ2⁻¹ with G = ∂L/∂C symmetric (b appears twice): ∂L/∂Σ2 = −C·G·C. Formed as a
+        // matrix, C keeps its smallest eigenvalue 1/λ_max only to a relative ε·λ_max/0.3, which
+        // is nothing for a needle or an edge-on disc (λ_max ≳ 1e9 px² fails even in f64). So the
+        // chain runs in the Gaussian's frame with w_k = C·v_k = adj(Σ2)·v_k / det, where the
+        // k-th term of adj(Σ2)·v_k = 0.3·v_k + Σ_j cross2(v_k, a_j)·perp(a_j) is exactly zero:
+        //   Q_jk = −w_jᵀ G w_k,  ∂L/∂s_k = 2 s_k Q_kk,  ∂L/∂R_k = 2 s_k² Σ_j Q_jk R_j,
+        //   ∂L/∂J = −2 Σ_k s_k² (C·G·w_k)(rot·R_k)ᵀ,  ⟨∂L/∂J, J⟩ = 2 Σ_k s_k² Q_kk.
         let [da, db, dc] = d.conic[i];
-        let dcon = [[da, 0.5 * db], [0.5 * db, dc]];
-        let mut dsigma2 = [[0.0; 2]; 2];
-        for r in 0..2 {
-            for s in 0..2 {
-                for k in 0..2 {
-                    for l in 0..2 {
-                        dsigma2[r][s] -= con[r][k] * dcon[k][l] * con[l][s];
-                    }
+        let gmul = |u: [f64; 2]| [da * u[0] + 0.5 * db * u[1], 0.5 * db * u[0] + dc * u[1]];
+        let adj_mul = |u: [f64; 2], skip: Option<usize>| {
+            let mut out = [DILATION * u[0], DILATION * u[1]];
+            for (j, aj) in f.a.iter().enumerate() {
+                if Some(j) != skip {
+                    let c = cross2(u, *aj);
+                    out[0] += c * aj[1];
+                    out[1] -= c * aj[0];
                 }
             }
-        }
-        // Σ2 = T Σ3 Tᵀ (+ const): dT = 2 dΣ2 T Σ3, dΣ3 = Tᵀ dΣ2 T.
-        let t = &f.t;
-        let mut dt = [[0.0; 3]; 2];
-        for r in 0..2 {
-            for s in 0..3 {
-                for k in 0..2 {
-                    for l in 0..3 {
-                        dt[r][s] += 2.0 * dsigma2[r][k] * t[k][l] * f.sigma3[l][s];
-                    }
-                }
+            out.map(|x| x / f.det)
+        };
+        let w: [[f64; 2]; 3] = std::array::from_fn(|k| adj_mul(f.v[k], Some(k)));
+        let q: M3 = std::array::from_fn(|j| {
+            std::array::from_fn(|k| {
+                let gw = gmul(w[k]);
+                -(w[j][0] * gw[0] + w[j][1] * gw[1])
+            })
+        });
+        let s = g.scales[i];
+        let s2 = s.map(|x| x * x);
+        out.scales[i] = std::array::from_fn(|k| 2.0 * s[k] * q[k][k]);
+        // dR[row][k] = ∂L/∂R_{row,k}.
+        let mut dr = [[0.0; 3]; 3];
+        for k in 0..3 {
+            for row in 0..3 {
+                dr[row][k] = 2.0 * s2[k] * (0..3).map(|j| q[j][k] * f.r[row][j]).sum::<f64>();
             }
         }
-        let mut dsigma3 = [[0.0; 3]; 3];
-        for r in 0..3 {
-            for s in 0..3 {
-                for k in 0..2 {
-                    for l in 0..2 {
-                        dsigma3[r][s] += t[k][r] * dsigma2[k][l] * t[l][s];
-                    }
-                }
-            }
+        // q̂ = q/|q|: dq = (dq̂ − q̂ (q̂·dq̂)) / |q|.
+        if f.qnorm > 0.0 {
+            let dqn = quat_to_rot_vjp(f.qn, &dr);
+            let dot: f64 = (0..4).map(|k| dqn[k] * f.qn[k]).sum();
+            out.quats[i] = std::array::from_fn(|k| (dqn[k] - f.qn[k] * dot) / f.qnorm);
         }
-        // T = J · rot: dJ = dT · rotᵀ.
+        // ∂L/∂J (2×3); its (0,0) and (1,1) entries enter only through ⟨∂L/∂J, J⟩ below.
         let mut dj = [[0.0; 3]; 2];
-        for r in 0..2 {
-            for s in 0..3 {
-                for k in 0..3 {
-                    dj[r][s] += dt[r][k] * rot[s][k];
+        for k in 0..3 {
+            let h = adj_mul(gmul(w[k]), None);
+            let axis: [f64; 3] =
+                std::array::from_fn(|row| (0..3).map(|l| rot[row][l] * f.r[l][k]).sum());
+            for row in 0..2 {
+                for col in 0..3 {
+                    dj[row][col] -= 2.0 * s2[k] * h[row] * axis[col];
                 }
             }
         }
+        let dj_dot_j: f64 = (0..3).map(|k| 2.0 * s2[k] * q[k][k]).sum();
         // J = [[fx/z, 0, −fx·tx/z²], [0, fy/z, −fy·ty/z²]], tx = z·clamp(x/z), ty likewise.
         let (tx, ty) = (z * f.txz, z * f.tyz);
         let z2 = z * z;
         let z3 = z2 * z;
-        dp[2] += dj[0][0] * (-fx / z2) + dj[1][1] * (-fy / z2);
-        dp[2] += dj[0][2] * (2.0 * fx * tx / z3) + dj[1][2] * (2.0 * fy * ty / z3);
+        // ∂J/∂z at fixed tx, ty = −J/z + (third column fx·tx/z³, fy·ty/z³).
+        dp[2] += -dj_dot_j / z + (dj[0][2] * fx * tx + dj[1][2] * fy * ty) / z3;
         let dtx = dj[0][2] * (-fx / z2);
         let dty = dj[1][2] * (-fy / z2);
         if f.clamp_x {
@@ -463,32 +457,6 @@ fn project_bwd_impl(
             }
         }
         out.means[i] = dmean;
-
-        // Σ3 = M Mᵀ: dM = 2 dΣ3 M;  M = R diag(s).
-        let mut dm = [[0.0; 3]; 3];
-        for r in 0..3 {
-            for s in 0..3 {
-                for k in 0..3 {
-                    dm[r][s] += 2.0 * dsigma3[r][k] * f.m[k][s];
-                }
-            }
-        }
-        let s = g.scales[i];
-        let mut dr = [[0.0; 3]; 3];
-        let mut ds = [0.0; 3];
-        for r in 0..3 {
-            for col in 0..3 {
-                dr[r][col] = dm[r][col] * s[col];
-                ds[col] += dm[r][col] * f.r[r][col];
-            }
-        }
-        out.scales[i] = ds;
-        // q̂ = q/|q|: dq = (dq̂ − q̂ (q̂·dq̂)) / |q|.
-        if f.qnorm > 0.0 {
-            let dqn = quat_to_rot_vjp(f.qn, &dr);
-            let dot: f64 = (0..4).map(|k| dqn[k] * f.qn[k]).sum();
-            out.quats[i] = std::array::from_fn(|k| (dqn[k] - f.qn[k] * dot) / f.qnorm);
-        }
 
         // opacity = sigmoid(logit).
         out.opacity_logits[i] = d.opacity[i] * sigmoid_grad(g.opacity_logits[i]);
