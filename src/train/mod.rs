@@ -59,7 +59,8 @@ pub struct Trainer<'g> {
     pub times: FrameTimes,
     pub sizes: StepSizes,
     raster: Rc<Rasterizer>,
-    passes: StepPasses,
+    /// Built on the first step (or restore): evaluation-only uses never allocate them.
+    passes: Option<StepPasses>,
     /// Built on the first evaluation; owns its scratch (evaluating never touches training's).
     eval: Option<Evaluator>,
     /// Iterations completed.
@@ -108,46 +109,10 @@ impl<'g> Trainer<'g> {
             frames::camera_extent(&data.train),
         );
         let raster = Rc::new(Rasterizer::new(gpu)?);
-        let roles = Decomposition::of(cfg.motion_order);
-        let motion = if motion_on {
-            let source: Box<dyn SceneMotion> = match cfg.motion_flow {
-                MotionFlow::Tvl1 => Box::new(OpticalFlow::new(
-                    gpu,
-                    FlowConfig::preset(&cfg.flow_preset)?,
-                    &sizes,
-                )?),
-                MotionFlow::Oracle => Box::new(OracleFlow),
-            };
-            let norm = NormConfig {
-                detach_stats: cfg.motion_norm_grad == NormGrad::Detached,
-                ..NormConfig::new(cfg.motion_normalize, 1e-6)?
-            };
-            Some(MotionTerm::new(
-                gpu,
-                raster.clone(),
-                &sizes,
-                roles,
-                norm,
-                source,
-            )?)
-        } else {
-            None
-        };
-        // The photometric render blends δ only when it is the one that splats it.
-        let photo_feats = if motion_on && roles.photo_splats {
-            3
-        } else {
-            0
-        };
-        let passes = StepPasses {
-            deform: DeformPass::new(gpu, &model.deform.cfg, &sizes, 1 + motion_on as usize, true)?,
-            render: RenderPass::new(raster.clone(), gpu, &sizes, photo_feats)?,
-            loss: PhotoLoss::new(gpu, &sizes)?,
-            motion,
-            adam: AdamPass::new(gpu)?,
-            densify: DensifyPass::new(gpu, cfg.densify, times.extent, cfg.seed)?,
-            watch: OverflowWatch::new(gpu, "step overflow flags", 2)?,
-        };
+        // Settings the passes read, checked now (the passes themselves are built on the first
+        // step: `eval` and `render` open a run without allocating training scratch).
+        FlowConfig::preset(&cfg.flow_preset)?;
+        NormConfig::new(cfg.motion_normalize, 1e-6)?;
         Ok(Trainer {
             gpu,
             cfg: cfg.clone(),
@@ -157,10 +122,25 @@ impl<'g> Trainer<'g> {
             times,
             sizes,
             raster,
-            passes,
+            passes: None,
             eval: None,
             iteration: 0,
         })
+    }
+
+    /// The step's passes, allocated on first use for the Gaussian budget and the image size.
+    fn passes(&mut self) -> Result<&mut StepPasses> {
+        if self.passes.is_none() {
+            self.passes = Some(build_passes(
+                self.gpu,
+                &self.cfg,
+                &self.model,
+                &self.sizes,
+                &self.times,
+                &self.raster,
+            )?);
+        }
+        Ok(self.passes.as_mut().expect("just built"))
     }
 
     /// The plan of 1-based `iteration`.
@@ -189,13 +169,14 @@ impl<'g> Trainer<'g> {
             } else {
                 Recorder::new(self.gpu)?
             };
-            let (m, s) = (&self.model, &mut self.passes);
+            self.passes()?;
+            let (m, s) = (&self.model, self.passes.as_mut().expect("built"));
             step::record_step(&mut rec, &p, m, s, &self.frames, self.cfg.lambda_ssim);
             let timings = rec.finish()?;
             // An overflowed render discarded the step on the GPU (no update, no statistics):
             // grow what overflowed and run the step again, so no step ever learns from a
             // truncated render and the result does not depend on the buffers' history.
-            let s = &mut self.passes;
+            let s = self.passes.as_mut().expect("built");
             let mut again = false;
             let o = s.watch.read(0);
             if o.overflowed {
@@ -217,7 +198,7 @@ impl<'g> Trainer<'g> {
             return Ok(if want_values {
                 Some(StepLog {
                     iteration: p.iteration,
-                    loss: self.passes.loss.values(self.gpu)?,
+                    loss: self.passes.as_ref().expect("built").loss.values(self.gpu)?,
                     num_gaussians: self.n(),
                     timings,
                 })
@@ -229,7 +210,7 @@ impl<'g> Trainer<'g> {
 
     /// 3DGS density control after step `p`, as its plan says.
     fn densify_if_due(&mut self, p: &StepPlan) -> Result<()> {
-        let d = &self.passes.densify;
+        let d = &self.passes.as_ref().expect("a step ran").densify;
         if let Some(screen_cut) = p.densify {
             d.densify(self.gpu, &mut self.model.gaussians, p.iteration, screen_cut)?;
         }
@@ -314,7 +295,11 @@ impl<'g> Trainer<'g> {
         Ok(Checkpoint {
             iteration: self.iteration,
             model: self.model.checkpoint(self.gpu)?,
-            densify_stats: self.passes.densify.stats(self.gpu, self.n())?,
+            densify_stats: match &self.passes {
+                Some(s) => s.densify.stats(self.gpu, self.n())?,
+                // No step yet: the statistics are still the zeros they start as.
+                None => std::array::from_fn(|_| vec![0.0; self.n() as usize]),
+            },
         })
     }
 
@@ -340,13 +325,68 @@ impl<'g> Trainer<'g> {
             };
             blob.check_values()?;
         }
+        self.passes()?;
         self.model.restore(self.gpu, &c.model)?;
-        self.passes
+        let gpu = self.gpu;
+        self.passes()?
             .densify
-            .restore_stats(self.gpu, &c.densify_stats)?;
+            .restore_stats(gpu, &c.densify_stats)?;
         self.iteration = c.iteration;
         Ok(())
     }
+}
+
+/// The passes of a training step for `cfg` (the motion term only when α > 0).
+fn build_passes(
+    gpu: &Gpu,
+    cfg: &TrainConfig,
+    model: &Model,
+    sizes: &StepSizes,
+    times: &FrameTimes,
+    raster: &Rc<Rasterizer>,
+) -> Result<StepPasses> {
+    let motion_on = cfg.motion_weight > 0.0;
+    let roles = Decomposition::of(cfg.motion_order);
+    let motion = if motion_on {
+        let source: Box<dyn SceneMotion> = match cfg.motion_flow {
+            MotionFlow::Tvl1 => Box::new(OpticalFlow::new(
+                gpu,
+                FlowConfig::preset(&cfg.flow_preset)?,
+                sizes,
+            )?),
+            MotionFlow::Oracle => Box::new(OracleFlow),
+        };
+        let norm = NormConfig {
+            detach_stats: cfg.motion_norm_grad == NormGrad::Detached,
+            ..NormConfig::new(cfg.motion_normalize, 1e-6)?
+        };
+        Some(MotionTerm::new(
+            gpu,
+            raster.clone(),
+            sizes,
+            roles,
+            norm,
+            source,
+        )?)
+    } else {
+        None
+    };
+    // The photometric render blends δ only when it is the one that splats it.
+    let photo_feats = if motion_on && roles.photo_splats {
+        3
+    } else {
+        0
+    };
+    let slots = 1 + motion_on as usize;
+    Ok(StepPasses {
+        deform: DeformPass::new(gpu, &model.deform.cfg, sizes, slots, true)?,
+        render: RenderPass::new(raster.clone(), gpu, sizes, photo_feats)?,
+        loss: PhotoLoss::new(gpu, sizes)?,
+        motion,
+        adam: AdamPass::new(gpu)?,
+        densify: DensifyPass::new(gpu, cfg.densify, times.extent, cfg.seed)?,
+        watch: OverflowWatch::new(gpu, "step overflow flags", 2)?,
+    })
 }
 
 /// The initial Gaussians from the dataset's points, evenly subsampled to the budget.
