@@ -39,6 +39,25 @@ fn host_checkpoint() -> Checkpoint {
 }
 
 /// The JSON header of a checkpoint file and the byte offset where the blobs start.
+#[test]
+fn round_trip_temp_file_and_truncation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let c = host_checkpoint();
+    let p = tmp.path().join("last.ckpt");
+    c.save(&p).unwrap();
+    assert_eq!(Checkpoint::load(&p).unwrap(), c);
+    assert!(
+        !dispflow_vk::train::checkpoint::temp_path(&p).exists(),
+        "the temp file was renamed away"
+    );
+    let bytes = std::fs::read(&p).unwrap();
+    for cut in [0, 7, 20, bytes.len() / 2, bytes.len() - 1] {
+        std::fs::write(&p, &bytes[..cut]).unwrap();
+        let e = load_err(&p);
+        assert!(e.contains("last.ckpt"), "error names the file: {e}");
+    }
+}
+
 fn header(bytes: &[u8]) -> (serde_json::Value, usize) {
     let hl = u64::from_le_bytes(bytes[8..16].try_into().unwrap()) as usize;
     let h = serde_json::from_slice(&bytes[16..16 + hl]).unwrap();
