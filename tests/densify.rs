@@ -519,6 +519,26 @@ fn densify_extremes() {
     let got = run_densify(&gpu, layout, &p, &m, &m, &stats, &s);
     assert!(got.count <= n as u32);
     compare("full", &got, &want, &p);
+    // Log-scales past f32 exp's range (89 ≥ 88.7) and just inside it: split children stay
+    // finite on both sides (the log-scale is clamped at LOG_SCALE_MAX before exp).
+    let n = 64;
+    let mut p = random_gaussians(8, n, 1);
+    for (i, l) in p.log_scales.iter_mut().enumerate() {
+        *l = [if i % 2 == 0 { 89.0 } else { 60.0 }, 0.0, -1.0];
+    }
+    let m = random_moments(9, n, 1);
+    let stats = random_stats(10, n, n);
+    let layout = GaussianLayout::new(4 * n as u32, 1);
+    let s = settings(layout.capacity);
+    let want = twin::densify(&p, &m, &m, &stats, &s);
+    assert!(want.report.split > 0, "{:?}", want.report);
+    let got = run_densify(&gpu, layout, &p, &m, &m, &stats, &s);
+    compare("huge log-scales", &got, &want, &p);
+    let finite = |g: &HostGaussians| g.means.iter().flatten().all(|v| v.is_finite());
+    assert!(
+        finite(&got.params) && finite(&want.params),
+        "split children finite"
+    );
 }
 
 #[test]

@@ -38,7 +38,10 @@ void copy_row(uint i, uint o, bool moments) {
 void child_row(uint i, uint c, uint o) {
     uint L = pc.row_len;
     if (pc.section == SECTION_MEANS) {
-        vec3 scale = exp(vec3(log_scales[3u * i], log_scales[3u * i + 1u], log_scales[3u * i + 2u]));
+        // Clamped like the deformation's exp (LOG_SCALE_MAX): a runaway log-scale (≥ 88.7
+        // overflows f32 exp) must not give a split child an infinite mean.
+        vec3 ls = vec3(log_scales[3u * i], log_scales[3u * i + 1u], log_scales[3u * i + 2u]);
+        vec3 scale = exp(min(ls, vec3(LOG_SCALE_MAX)));
         float qlen;
         mat3 R = quat_to_mat(quat_normalize(quats[i], qlen));
         vec3 z = split_normals(pc.seed, pc.iteration, i, c);

@@ -177,11 +177,13 @@ fn quat_to_rot(q: [f32; 4]) -> [[f64; 3]; 3] {
     })
 }
 
-/// Mean of split child `c` of Gaussian `i`: `R(q̂)·(exp(log_scale) ⊙ z) + mean`, f64 inside.
+/// Mean of split child `c` of Gaussian `i`: `R(q̂)·(exp(min(log_scale, LOG_SCALE_MAX)) ⊙ z) +
+/// mean`, f64 inside (the clamp keeps a runaway log-scale's children finite).
 pub fn split_mean(g: &HostGaussians, i: usize, c: u32, seed: u32, iteration: u32) -> [f32; 3] {
     let z = split_normals(seed, iteration, i as u32, c);
     let r = quat_to_rot(g.quats[i]);
-    let s = g.log_scales[i].map(|l| (l as f64).exp());
+    let max = crate::kernels::deform::LOG_SCALE_MAX as f64;
+    let s = g.log_scales[i].map(|l| (l as f64).min(max).exp());
     std::array::from_fn(|row| {
         let off: f64 = (0..3).map(|col| r[row][col] * s[col] * z[col]).sum();
         (g.means[i][row] as f64 + off) as f32
