@@ -385,20 +385,7 @@ fn twin_check(label: &str, scene: &Scene, cam: &Camera, opts: &RenderOpts, tol: 
 
     let u = upstream(17, px, k as usize);
     let grads = backward(&gpu, &rast, &b, cam, &up, opts, &u);
-    let d_rgb: Vec<[f32; 3]> = (0..px)
-        .map(|p| [u.rgba[4 * p], u.rgba[4 * p + 1], u.rgba[4 * p + 2]])
-        .collect();
-    let d_alpha: Vec<f32> = (0..px).map(|p| u.rgba[4 * p + 3]).collect();
-    let bg = twin::blend_bwd(
-        &bp,
-        &proj,
-        &scene.features,
-        &fwd,
-        &d_rgb,
-        &d_alpha,
-        &u.depth,
-        &u.features,
-    );
+    let bg = twin_blend_bwd(&bp, &proj, &scene.features, &fwd, &u);
     let pg = twin::project_bwd(cam, &g, &proj, &bg);
     let s = G2D_STRIDE as usize;
     let col = |lo: usize, hi: usize| -> Vec<f32> {

@@ -163,20 +163,7 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
 
     let u = upstream(seed + 100, px, k as usize);
     let grads = backward(&gpu, &rast, &b, &cam, &up, &opts, &u);
-    let d_rgb: Vec<[f32; 3]> = (0..px)
-        .map(|p| [u.rgba[4 * p], u.rgba[4 * p + 1], u.rgba[4 * p + 2]])
-        .collect();
-    let d_alpha: Vec<f32> = (0..px).map(|p| u.rgba[4 * p + 3]).collect();
-    let bg = twin::blend_bwd(
-        &bp,
-        &proj,
-        &scene.features,
-        &fwd,
-        &d_rgb,
-        &d_alpha,
-        &u.depth,
-        &u.features,
-    );
+    let bg = twin_blend_bwd(&bp, &proj, &scene.features, &fwd, &u);
     let s = G2D_STRIDE as usize;
     let col = |lo: usize, hi: usize| -> Vec<f32> {
         (0..n)

@@ -281,3 +281,28 @@ pub fn upstream(seed: u64, px: usize, k: usize) -> Upstream {
         features: (0..k * px).map(|_| u()).collect(),
     }
 }
+
+/// The twin's blend backward for the same upstream gradients the GPU backward got.
+pub fn twin_blend_bwd(
+    bp: &dispflow_vk::reference::raster::BlendParams,
+    proj: &dispflow_vk::reference::raster::Projected,
+    features: &[f32],
+    fwd: &dispflow_vk::reference::raster::BlendOut,
+    u: &Upstream,
+) -> dispflow_vk::reference::raster::BlendGrads {
+    let px = u.depth.len();
+    let d_rgb: Vec<[f32; 3]> = (0..px)
+        .map(|p| [u.rgba[4 * p], u.rgba[4 * p + 1], u.rgba[4 * p + 2]])
+        .collect();
+    let d_alpha: Vec<f32> = (0..px).map(|p| u.rgba[4 * p + 3]).collect();
+    dispflow_vk::reference::raster::blend_bwd(
+        bp,
+        proj,
+        features,
+        fwd,
+        &d_rgb,
+        &d_alpha,
+        &u.depth,
+        &u.features,
+    )
+}
