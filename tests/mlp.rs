@@ -17,6 +17,7 @@
 
 use dispflow_vk::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
 use dispflow_vk::kernels::mlp_fused::{MlpFused, Precision};
+use dispflow_vk::kernels::mlp_rows::MlpKernels;
 use dispflow_vk::model::deform::{MlpConfig, MlpLayout, TimeEncoding};
 use dispflow_vk::reference::mlp::{self as twin, Activations, Times};
 use dispflow_vk::testing::{self, Noise};
@@ -182,8 +183,11 @@ fn assert_close(what: &str, got: &[f32], want: &[f64], rel: f64, abs: f64) -> f6
 }
 
 /// Forward (and backward) on the layer-wise GPU path vs the twin. Returns the normwise errors.
-fn check_layerwise(gpu: &Gpu, c: &Case, backward: bool) -> (f64, f64) {
-    let mlp = Mlp::new(gpu, &c.lay.cfg).unwrap();
+/// Both kernel paths (tiled GEMMs and the register path) against the twin.
+const KERNELS: [MlpKernels; 2] = [MlpKernels::Tiled, MlpKernels::Rows];
+
+fn check_layerwise(gpu: &Gpu, c: &Case, backward: bool, kernels: MlpKernels) -> (f64, f64) {
+    let mlp = Mlp::with_kernels(gpu, &c.lay.cfg, kernels).unwrap();
     let b = noisy_buffers(gpu, &mlp, c.n.max(1) as u32);
     let io = Io::new(gpu, c);
     let n = c.n as u32;
@@ -212,7 +216,7 @@ fn check_layerwise(gpu: &Gpu, c: &Case, backward: bool) -> (f64, f64) {
     let p64: Vec<f64> = c.params.iter().map(|&v| v as f64).collect();
     let want = twin::forward_f64(&c.lay, &p64, &c.xyz, c.twin_times());
     let got: Vec<f32> = gpu.read(io.out.elems::<f32>(0, c.n as u64 * 10)).unwrap();
-    let label = format!("{:?} n={} fwd", c.lay.cfg, c.n);
+    let label = format!("{kernels:?} {:?} n={} fwd", c.lay.cfg, c.n);
     let ef = assert_close(&label, &got, &want.out, 1e-5, 1e-7);
     // The stored encoding matches the twin's: raw x exactly, sin/cos within 1e-5 absolute.
     // With the phase-exact reduction the error is the device's sin/cos on [−π, π] alone: it
@@ -240,7 +244,7 @@ fn check_layerwise(gpu: &Gpu, c: &Case, backward: bool) -> (f64, f64) {
             let w = l.w_off..l.w_off + l.fan_in * l.fan_out;
             let bb = l.b_off..l.b_off + l.fan_out;
             let what = format!(
-                "{:?} n={} grad of linear {li} ({:?})",
+                "{kernels:?} {:?} n={} grad of linear {li} ({:?})",
                 c.lay.cfg, c.n, l.role
             );
             eb = eb.max(assert_close(
@@ -262,14 +266,26 @@ fn check_layerwise(gpu: &Gpu, c: &Case, backward: bool) -> (f64, f64) {
     (ef, eb)
 }
 
+/// [`check_layerwise`] on every kernel path; the largest errors.
+fn check_every_path(gpu: &Gpu, c: &Case, backward: bool) -> (f64, f64) {
+    KERNELS.iter().fold((0.0, 0.0), |(a, b), &k| {
+        let (ef, eb) = check_layerwise(gpu, c, backward, k);
+        (a.max(ef), b.max(eb))
+    })
+}
+
 #[test]
 fn layerwise_small_configs_match_twin() {
     let gpu = testing::gpu();
     for tn in [false, true] {
         for (k, n) in [1usize, 37, 4096, 65_537].into_iter().enumerate() {
             let c = Case::new(small(tn), n, 10 + k as u64, 1.5, k % 2 == 1);
-            let (ef, eb) = check_layerwise(&gpu, &c, true);
-            eprintln!("4x64 time_net={tn} n={n}: fwd {ef:.2e}, bwd {eb:.2e} (normwise)");
+            for kern in KERNELS {
+                let (ef, eb) = check_layerwise(&gpu, &c, true, kern);
+                eprintln!(
+                    "{kern:?} 4x64 time_net={tn} n={n}: fwd {ef:.2e}, bwd {eb:.2e} (normwise)"
+                );
+            }
         }
     }
 }
@@ -280,11 +296,13 @@ fn layerwise_presets_match_twin() {
     for cfg in [MlpConfig::synthetic(), MlpConfig::real()] {
         for (k, n) in [1usize, 37, 4096].into_iter().enumerate() {
             let c = Case::new(cfg, n, 20 + k as u64, 1.5, k == 2);
-            let (ef, eb) = check_layerwise(&gpu, &c, true);
-            eprintln!(
-                "8x256 time_net={} n={n}: fwd {ef:.2e}, bwd {eb:.2e}",
-                cfg.time_net()
-            );
+            for kern in KERNELS {
+                let (ef, eb) = check_layerwise(&gpu, &c, true, kern);
+                eprintln!(
+                    "{kern:?} 8x256 time_net={} n={n}: fwd {ef:.2e}, bwd {eb:.2e}",
+                    cfg.time_net()
+                );
+            }
         }
     }
     // No skip connection.
@@ -298,14 +316,22 @@ fn layerwise_presets_match_twin() {
         1.5,
         false,
     );
-    check_layerwise(&gpu, &c, true);
+    for kern in KERNELS {
+        check_layerwise(&gpu, &c, true, kern);
+    }
 }
 
 #[test]
 fn backward_accumulates_and_zero_gaussians_give_zero() {
+    for kern in KERNELS {
+        accumulates_and_zero_rows(kern);
+    }
+}
+
+fn accumulates_and_zero_rows(kern: MlpKernels) {
     let gpu = testing::gpu();
     let c = Case::new(small(true), 200, 31, 1.0, true);
-    let mlp = Mlp::new(&gpu, &c.lay.cfg).unwrap();
+    let mlp = Mlp::with_kernels(&gpu, &c.lay.cfg, kern).unwrap();
     let b = noisy_buffers(&gpu, &mlp, 200);
     let io = Io::new(&gpu, &c);
     let mut rec = Recorder::new(&gpu).unwrap();
@@ -396,11 +422,11 @@ fn extremes_positions_1e4_and_time_outside_unit_interval() {
     }
     c.xyz[0] = 1e4;
     c.xyz[1] = -1e4;
-    let (ef, eb) = check_layerwise(&gpu, &c, true);
+    let (ef, eb) = check_every_path(&gpu, &c, true);
     eprintln!("|x| ≤ 1e4, t ∉ [0,1]: fwd {ef:.2e}, bwd {eb:.2e}");
     let c = Case::new(MlpConfig::real(), 16, 42, 1e4, false);
     let c = Case { t: -3.5, ..c };
-    check_layerwise(&gpu, &c, false);
+    check_every_path(&gpu, &c, false);
 }
 
 /// Errors of the fused forwards: f32 against the f64 twin, fp16 against the f64 twin (its
@@ -706,7 +732,7 @@ fn time_far_outside_the_unit_interval_matches_twin_on_every_path() {
                 t,
                 ..Case::new(cfg, 48, 100 + k as u64, 1.5, false)
             };
-            let (ef, eb) = check_layerwise(&gpu, &c, true);
+            let (ef, eb) = check_every_path(&gpu, &c, true);
             let e = check_fused(&gpu, &c, true, 2e-2, F16_TWIN_REL);
             eprintln!(
                 "t = {t}, {}x{} time_net={}: layer-wise fwd {ef:.2e}, bwd {eb:.2e}; {}",
@@ -720,7 +746,7 @@ fn time_far_outside_the_unit_interval_matches_twin_on_every_path() {
         for (i, t) in c.times.as_mut().unwrap().iter_mut().enumerate() {
             *t = [-50.0, 1e3, -3.5, 1e5][i % 4];
         }
-        let (ef, eb) = check_layerwise(&gpu, &c, true);
+        let (ef, eb) = check_every_path(&gpu, &c, true);
         let e = check_fused(&gpu, &c, true, 1.0, F16_TWIN_REL);
         eprintln!(
             "t per Gaussian in {{−50, 1e3, −3.5, 1e5}}, {}x{}: layer-wise fwd {ef:.2e}, bwd {eb:.2e}; {}",

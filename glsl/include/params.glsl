@@ -76,6 +76,36 @@ struct MlpBwdWeightParams {
     uint chunk_rows; // rows per partial (multiple of 16)
 };
 
+// src/kernels/mlp.rs, register path (linear_rows): for the window of outputs j < count,
+//   out[r][out_col + j] (+)= act(bias[j] + Σ_k M[j][k] · in[r][k]) · mask,  in = [A | B],
+// M = the uniform-buffer window (row j at m_res + j·fan_in floats), bias at b_res in its own.
+struct MlpRowsParams {
+    uint n;
+    uint fan_in;     // K (= ka + columns from B)
+    uint ka;
+    uint a_stride;
+    uint b_stride;
+    uint out_stride;
+    uint out_col;    // column of the window's first output
+    uint count;      // outputs in this window
+    uint m_res;      // floats from the bound window's start to M[0][0] (offset alignment)
+    uint b_res;      // same for the bias; has_bias = 0 ignores it
+    uint has_bias;
+    uint relu;
+    uint mask_stride;// 0: no mask; else mask = act[r][mask_col + j] > 0
+    uint mask_col;
+    uint accumulate; // 1: add into out
+    uint pad;
+};
+
+// src/kernels/mlp.rs: wt[w_off + c·fan_out + o] = W[o][c] (the backward's weight windows).
+struct MlpTransposeParams {
+    uint fan_in;
+    uint fan_out;
+    uint w_off;
+    uint pad;
+};
+
 // src/kernels/mlp.rs: grad[W, b] (+)= Σ_s partial[s].
 struct MlpReduceParams {
     uint count;      // fan_out · (fan_in + 1)

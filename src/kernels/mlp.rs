@@ -14,6 +14,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
+use super::mlp_rows::{Gemv, MlpKernels, RowsPath};
 use crate::error::{Error, Result};
 use crate::model::deform::{LinearSpec, MlpConfig, MlpLayout, OUT_DIMS};
 use crate::shaders;
@@ -120,6 +121,8 @@ pub struct Mlp {
     bwd_data: ComputePipeline,
     bwd_weight: ComputePipeline,
     reduce: ComputePipeline,
+    /// The register path, when [`MlpKernels::Rows`] runs the forward and input gradients.
+    rows: Option<RowsPath>,
 }
 
 /// Activations and scratch for up to `capacity` Gaussians, allocated once. Shapes (row-major,
@@ -135,6 +138,8 @@ pub struct MlpBuffers {
     dz: [Buffer; 2],
     dtf: Buffer,
     partials: Buffer,
+    /// Wᵀ per Linear at the layout's offsets (register path's input gradients).
+    wt: Buffer,
     dummy: Buffer,
 }
 
@@ -186,8 +191,17 @@ fn chunking(n: u32) -> (u32, u32) {
 }
 
 impl Mlp {
+    /// The kernels [`MlpKernels::for_device`] picks.
     pub fn new(gpu: &Gpu, cfg: &MlpConfig) -> Result<Self> {
+        Self::with_kernels(gpu, cfg, MlpKernels::for_device(gpu))
+    }
+
+    pub fn with_kernels(gpu: &Gpu, cfg: &MlpConfig, kernels: MlpKernels) -> Result<Self> {
         Ok(Mlp {
+            rows: match kernels {
+                MlpKernels::Rows => Some(RowsPath::new(gpu)?),
+                MlpKernels::Tiled => None,
+            },
             layout: MlpLayout::new(cfg)?,
             encode: gpu.pipeline(&shaders::mlp::ENCODE)?,
             fwd: gpu.pipeline(&shaders::mlp::LINEAR_FWD)?,
@@ -195,6 +209,14 @@ impl Mlp {
             bwd_weight: gpu.pipeline(&shaders::mlp::LINEAR_BWD_WEIGHT)?,
             reduce: gpu.pipeline(&shaders::mlp::REDUCE_GRAD)?,
         })
+    }
+
+    pub fn kernels(&self) -> MlpKernels {
+        if self.rows.is_some() {
+            MlpKernels::Rows
+        } else {
+            MlpKernels::Tiled
+        }
     }
 
     fn cfg(&self) -> &MlpConfig {
@@ -256,6 +278,14 @@ impl Mlp {
                 },
             )?,
             partials: f("mlp grad partials", MAX_CHUNKS as u64 * max_linear)?,
+            wt: f(
+                "mlp transposed weights",
+                if self.rows.is_some() {
+                    self.layout.total as u64
+                } else {
+                    1
+                },
+            )?,
             dummy: f("mlp no times", 4)?,
         })
     }
@@ -398,6 +428,26 @@ impl Mlp {
             relu: relu as u32,
             pad: 0,
         };
+        if let Some(rp) = self.rows.as_ref().filter(|_| RowsPath::fits(l.fan_in)) {
+            rp.gemv(
+                rec,
+                &Gemv {
+                    n,
+                    a,
+                    b: bb,
+                    fan_in: l.fan_in as u32,
+                    mat: params,
+                    m_off: l.w_off as u64,
+                    count: l.fan_out as u32,
+                    bias: Some(l.b_off as u64),
+                    relu,
+                    out,
+                    mask: None,
+                    accumulate: false,
+                },
+            );
+            return;
+        }
         let binb = bb.map_or(a.0, |x| x.0);
         let grid = row_grid(n, (l.fan_out as u32).div_ceil(TILE));
         rec.dispatch(&self.fwd, &pc, &[params, a.0, binb, out.0], grid);
@@ -432,6 +482,12 @@ impl Mlp {
         );
         let (chunks, chunk_rows) = chunking(n);
         rec.set_zone("mlp bwd");
+        if let Some(rp) = &self.rows {
+            for l in &self.layout.linears {
+                let (fi, fo) = (l.fan_in as u32, l.fan_out as u32);
+                rp.transpose(rec, params, b.wt.all(), fi, fo, l.w_off as u32);
+            }
+        }
         // dW, db of one Linear whose input is [a | bb] and output gradient dz.
         let weights = |rec: &mut Recorder<'_>,
                        l: &LinearSpec,
@@ -496,6 +552,27 @@ impl Mlp {
                 w_off: l.w_off as u32,
                 accumulate: acc as u32,
             };
+            if let Some(rp) = self.rows.as_ref().filter(|_| RowsPath::fits(l.fan_out)) {
+                // Wᵀ rows col0.. are the matrix; dz is the input.
+                rp.gemv(
+                    rec,
+                    &Gemv {
+                        n,
+                        a: (dz.0, l.fan_out as u32, dz.1),
+                        b: None,
+                        fan_in: l.fan_out as u32,
+                        mat: b.wt.all(),
+                        m_off: (l.w_off + col0 as usize * l.fan_out) as u64,
+                        count: cols,
+                        bias: None,
+                        relu: false,
+                        out,
+                        mask,
+                        accumulate: acc,
+                    },
+                );
+                return;
+            }
             let m = mask.map_or(dz.0, |m| m.0);
             rec.dispatch(
                 &self.bwd_data,

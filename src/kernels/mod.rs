@@ -10,6 +10,7 @@ pub mod loss;
 pub mod metrics;
 pub mod mlp;
 pub mod mlp_fused;
+pub mod mlp_rows;
 pub mod motion;
 pub mod radix_sort;
 pub mod raster;
@@ -181,6 +182,26 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             pad0,
             pad1
         ),
+        layout!(
+            mlp_rows::MlpRowsParams,
+            n,
+            fan_in,
+            ka,
+            a_stride,
+            b_stride,
+            out_stride,
+            out_col,
+            count,
+            m_res,
+            b_res,
+            has_bias,
+            relu,
+            mask_stride,
+            mask_col,
+            accumulate,
+            pad
+        ),
+        layout!(mlp_rows::MlpTransposeParams, fan_in, fan_out, w_off, pad),
         layout!(
             mlp_fused::MlpFusedParams,
             n,

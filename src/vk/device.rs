@@ -62,6 +62,9 @@ pub struct DeviceInfo {
     pub max_workgroup_count: [u32; 3],
     pub max_storage_buffer_range: u32,
     pub min_storage_buffer_offset_alignment: u64,
+    /// Largest uniform-buffer range one binding may cover (lavapipe: 64 KiB).
+    pub max_uniform_buffer_range: u32,
+    pub min_uniform_buffer_offset_alignment: u64,
     pub max_push_constants: u32,
     /// Nanoseconds per timestamp tick; `None` when the compute queue has no timestamps.
     pub timestamp_period_ns: Option<f32>,
@@ -537,6 +540,8 @@ impl Gpu {
             max_workgroup_count: p.limits.max_compute_work_group_count,
             max_storage_buffer_range: p.limits.max_storage_buffer_range,
             min_storage_buffer_offset_alignment: p.limits.min_storage_buffer_offset_alignment,
+            max_uniform_buffer_range: p.limits.max_uniform_buffer_range,
+            min_uniform_buffer_offset_alignment: p.limits.min_uniform_buffer_offset_alignment,
             max_push_constants: p.limits.max_push_constants_size,
             timestamp_period_ns: (ts_bits > 0 && p.limits.timestamp_period > 0.0)
                 .then_some(p.limits.timestamp_period),

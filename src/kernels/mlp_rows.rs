@@ -1,0 +1,215 @@
+//! The MLP's register path (`glsl/mlp/linear_rows.comp`, `transpose_w.comp`): Linears for
+//! CPU-like devices, selected per device by [`MlpKernels`]. Same maths and row-major buffers
+//! as the tiled GEMMs of [`super::mlp`], so the two paths are interchangeable per Linear.
+//!
+//! Why a second path: on lavapipe every storage-buffer or shared-memory load is a per-lane
+//! loop, while a uniform-buffer load at a uniform index is one scalar load and a broadcast.
+//! The kernel keeps each row's input in a private array and reads weights from a uniform
+//! buffer, so the matrix is bound in windows of whole rows of at most
+//! `maxUniformBufferRange` bytes (one dispatch per window).
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::error::Result;
+use crate::shaders;
+use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
+
+/// Mirrors `MlpRowsParams` in glsl/include/params.glsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct MlpRowsParams {
+    pub n: u32,
+    pub fan_in: u32,
+    pub ka: u32,
+    pub a_stride: u32,
+    pub b_stride: u32,
+    pub out_stride: u32,
+    pub out_col: u32,
+    pub count: u32,
+    pub m_res: u32,
+    pub b_res: u32,
+    pub has_bias: u32,
+    pub relu: u32,
+    pub mask_stride: u32,
+    pub mask_col: u32,
+    pub accumulate: u32,
+    pub pad: u32,
+}
+
+/// Mirrors `MlpTransposeParams` in glsl/include/params.glsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct MlpTransposeParams {
+    pub fan_in: u32,
+    pub fan_out: u32,
+    pub w_off: u32,
+    pub pad: u32,
+}
+
+/// Which kernels run the MLP's Linears.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+pub enum MlpKernels {
+    /// 64×64 shared-memory tiles per workgroup (GPUs).
+    Tiled,
+    /// Rows per invocation, weights from uniform buffers (CPU devices such as lavapipe).
+    Rows,
+}
+
+impl MlpKernels {
+    /// `DISPFLOW_MLP_KERNELS=tiled|rows` when set, else by device type: the register path on
+    /// CPU devices (measured 6–10× faster there, see `cargo bench --bench mlp`), tiles on GPUs.
+    pub fn for_device(gpu: &Gpu) -> Self {
+        match std::env::var("DISPFLOW_MLP_KERNELS").as_deref() {
+            Ok("tiled") => MlpKernels::Tiled,
+            Ok("rows") => MlpKernels::Rows,
+            _ if gpu.info.kind == "CPU" => MlpKernels::Rows,
+            _ => MlpKernels::Tiled,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            MlpKernels::Tiled => "tiled",
+            MlpKernels::Rows => "rows",
+        }
+    }
+}
+
+/// Rows per invocation × invocations per workgroup (mirrors R and local_size_x).
+const ROWS_PER_GROUP: u32 = 4 * 64;
+/// Largest fan-in the kernel's private array holds (mirrors KMAX); wider Linears use tiles.
+pub const KMAX: usize = 512;
+/// The uniform-buffer block's declared size (4096 vec4).
+const UBO_BLOCK: u64 = 65536;
+
+/// One Linear-shaped product on the register path.
+pub struct Gemv<'a> {
+    pub n: u32,
+    /// Input: (A, columns from A, A's row stride), optional (B, B's row stride).
+    pub a: (BufSlice<'a>, u32, u32),
+    pub b: Option<(BufSlice<'a>, u32)>,
+    pub fan_in: u32,
+    /// The matrix: `count` rows of `fan_in` floats at float `m_off` of `mat`.
+    pub mat: BufSlice<'a>,
+    pub m_off: u64,
+    pub count: u32,
+    /// Bias floats at `b_off` of `mat`'s buffer (forward only).
+    pub bias: Option<u64>,
+    pub relu: bool,
+    /// Output (slice, row stride, first column).
+    pub out: (BufSlice<'a>, u32, u32),
+    /// ReLU mask of the produced columns: (act, row stride).
+    pub mask: Option<(BufSlice<'a>, u32)>,
+    pub accumulate: bool,
+}
+
+pub struct RowsPath {
+    rows: ComputePipeline,
+    transpose: ComputePipeline,
+    range: u64,
+    align: u64,
+}
+
+impl RowsPath {
+    pub fn new(gpu: &Gpu) -> Result<Self> {
+        Ok(RowsPath {
+            rows: gpu.pipeline(&shaders::mlp::LINEAR_ROWS)?,
+            transpose: gpu.pipeline(&shaders::mlp::TRANSPOSE_W)?,
+            range: (gpu.info.max_uniform_buffer_range as u64).min(UBO_BLOCK),
+            align: gpu.info.min_uniform_buffer_offset_alignment.max(4),
+        })
+    }
+
+    /// Whether a product with this fan-in runs here (else the caller uses tiles).
+    pub fn fits(fan_in: usize) -> bool {
+        fan_in <= KMAX
+    }
+
+    /// `floats` floats from float `first` of `s` as an aligned uniform window: the slice and
+    /// the floats between its start and `first`.
+    fn window<'b>(&self, s: BufSlice<'b>, first: u64, floats: u64) -> (BufSlice<'b>, u32) {
+        let start = s.offset + first * 4;
+        let base = start / self.align * self.align;
+        let size = (start - base + floats * 4).min(s.buf.size() - base);
+        (s.buf.slice(base, size), ((start - base) / 4) as u32)
+    }
+
+    /// Records `g` as one dispatch per window of matrix rows.
+    pub fn gemv(&self, rec: &mut Recorder<'_>, g: &Gemv<'_>) {
+        assert!(
+            Self::fits(g.fan_in as usize),
+            "fan-in {} > {KMAX}",
+            g.fan_in
+        );
+        // Rows per window, leaving room for the alignment residue.
+        let per = ((self.range - self.align) / 4 / g.fan_in as u64).max(1) as u32;
+        let groups = g.n.div_ceil(ROWS_PER_GROUP);
+        let grid = if groups <= 65535 {
+            [groups.max(1), 1, 1]
+        } else {
+            [65535, groups.div_ceil(65535), 1]
+        };
+        if g.n == 0 {
+            return;
+        }
+        let mut j = 0;
+        while j < g.count {
+            let cnt = per.min(g.count - j);
+            let (mw, m_res) = self.window(
+                g.mat,
+                g.m_off + j as u64 * g.fan_in as u64,
+                cnt as u64 * g.fan_in as u64,
+            );
+            let (bw, b_res) = match g.bias {
+                Some(b) => self.window(g.mat, b + j as u64, cnt as u64),
+                None => (mw, 0),
+            };
+            let pc = MlpRowsParams {
+                n: g.n,
+                fan_in: g.fan_in,
+                ka: g.a.1,
+                a_stride: g.a.2,
+                b_stride: g.b.map_or(0, |x| x.1),
+                out_stride: g.out.1,
+                out_col: g.out.2 + j,
+                count: cnt,
+                m_res,
+                b_res,
+                has_bias: g.bias.is_some() as u32,
+                relu: g.relu as u32,
+                mask_stride: g.mask.map_or(0, |m| m.1),
+                mask_col: j,
+                accumulate: g.accumulate as u32,
+                pad: 0,
+            };
+            let binb = g.b.map_or(g.a.0, |x| x.0);
+            let act = g.mask.map_or(g.a.0, |m| m.0);
+            rec.dispatch(&self.rows, &pc, &[mw, bw, g.a.0, binb, act, g.out.0], grid);
+            j += cnt;
+        }
+    }
+
+    /// Wᵀ of the Linear at `w_off` (`fan_out` × `fan_in`) into the same offsets of `wt`.
+    pub fn transpose(
+        &self,
+        rec: &mut Recorder<'_>,
+        params: BufSlice<'_>,
+        wt: BufSlice<'_>,
+        fan_in: u32,
+        fan_out: u32,
+        w_off: u32,
+    ) {
+        let pc = MlpTransposeParams {
+            fan_in,
+            fan_out,
+            w_off,
+            pad: 0,
+        };
+        rec.dispatch_threads(
+            &self.transpose,
+            &pc,
+            &[params, wt],
+            [fan_in * fan_out, 1, 1],
+        );
+    }
+}
