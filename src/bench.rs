@@ -8,7 +8,8 @@
 use crate::error::{Error, Result};
 use crate::kernels::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use crate::kernels::raster::{
-    split_sh, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
+    split_sh, BlendBwdVariant, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer,
+    RenderOpts, SplatInputs,
 };
 use crate::kernels::scan::{Count, PrefixSum, ScanScratch};
 use crate::reference;
@@ -293,6 +294,11 @@ impl RasterCase {
     pub fn intersections(&self, gpu: &Gpu) -> Result<u32> {
         self.bufs.intersections(gpu)
     }
+
+    /// The blend-backward variant the next `run` records.
+    pub fn set_blend_bwd_variant(&mut self, v: BlendBwdVariant) {
+        self.rast.set_blend_bwd_variant(v);
+    }
 }
 
 fn splat_inputs(inputs: &[Buffer; 6], n: u32) -> SplatInputs<'_> {
@@ -453,14 +459,18 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
     if has(Suite::Raster) {
         for &res in &args.resolutions {
             for &n in &args.gaussians {
-                let case = RasterCase::new(&gpu, n, res)?;
+                let mut case = RasterCase::new(&gpu, n, res)?;
                 let isect = case.intersections(&gpu)?;
-                for bwd in [false, true] {
-                    let (med, stages) = measure(args.reps, || case.run(&gpu, bwd))?;
+                let runs = std::iter::once(None).chain(BlendBwdVariant::ALL.map(Some));
+                for bwd in runs {
+                    if let Some(v) = bwd {
+                        case.set_blend_bwd_variant(v);
+                    }
+                    let (med, stages) = measure(args.reps, || case.run(&gpu, bwd.is_some()))?;
                     rows.push(BenchRow {
                         kernel: format!(
                             "raster {} {res}² ({isect} tile hits)",
-                            if bwd { "fwd+bwd" } else { "fwd" }
+                            bwd.map_or("fwd".into(), |v| format!("fwd+bwd {}", v.name()))
                         ),
                         n,
                         median_ms: med,

@@ -266,13 +266,55 @@ fn sort_bits(cam: &Camera) -> u32 {
     32 + (32 - (tiles - 1).leading_zeros())
 }
 
+/// How `blend_bwd` folds per-pixel gradient terms into per-splat sums. All variants compute
+/// the same sums (up to float summation order); they differ in speed per device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BlendBwdVariant {
+    /// 16×16 invocations per tile, splats staged in shared memory; per splat, one subgroupAdd
+    /// and one float atomic per subgroup and component (`blend_bwd.glsl`). GPU-shaped.
+    SubgroupAtomic,
+    /// 8 invocations per tile, 32 pixels each; per splat, the terms are summed over the whole
+    /// tile and added with one atomic per component (`blend_bwd_tile.glsl`). CPU-shaped.
+    TileAccum,
+    /// As `TileAccum` with 32 invocations of 8 pixels each.
+    TileAccum8,
+}
+
+impl BlendBwdVariant {
+    pub const ALL: [BlendBwdVariant; 3] = [
+        BlendBwdVariant::SubgroupAtomic,
+        BlendBwdVariant::TileAccum,
+        BlendBwdVariant::TileAccum8,
+    ];
+
+    /// The default for a device: per-tile accumulation on CPU devices (lavapipe), where it
+    /// measured fastest; the subgroup kernel elsewhere.
+    pub fn for_device(info: &crate::vk::DeviceInfo) -> Self {
+        if info.kind == "CPU" {
+            BlendBwdVariant::TileAccum
+        } else {
+            BlendBwdVariant::SubgroupAtomic
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            BlendBwdVariant::SubgroupAtomic => "subgroup-atomic",
+            BlendBwdVariant::TileAccum => "tile-accum",
+            BlendBwdVariant::TileAccum8 => "tile-accum8",
+        }
+    }
+}
+
 pub struct Rasterizer {
     project: ComputePipeline,
     bin_total: ComputePipeline,
     bin_emit: ComputePipeline,
     bin_ranges: ComputePipeline,
     blend_fwd: [ComputePipeline; 3],
-    blend_bwd: [ComputePipeline; 3],
+    /// Per variant (`BlendBwdVariant::ALL` order), per feature count.
+    blend_bwd: Vec<[ComputePipeline; 3]>,
+    blend_bwd_variant: BlendBwdVariant,
     project_bwd: ComputePipeline,
     scan: PrefixSum,
     sort: RadixSort,
@@ -304,15 +346,38 @@ impl Rasterizer {
                 gpu.pipeline(&r::BLEND_FWD_F2)?,
                 gpu.pipeline(&r::BLEND_FWD_F3)?,
             ],
-            blend_bwd: [
-                gpu.pipeline(&r::BLEND_BWD_F0)?,
-                gpu.pipeline(&r::BLEND_BWD_F2)?,
-                gpu.pipeline(&r::BLEND_BWD_F3)?,
+            blend_bwd: vec![
+                [
+                    gpu.pipeline(&r::BLEND_BWD_F0)?,
+                    gpu.pipeline(&r::BLEND_BWD_F2)?,
+                    gpu.pipeline(&r::BLEND_BWD_F3)?,
+                ],
+                [
+                    gpu.pipeline(&r::BLEND_BWD_PX32_F0)?,
+                    gpu.pipeline(&r::BLEND_BWD_PX32_F2)?,
+                    gpu.pipeline(&r::BLEND_BWD_PX32_F3)?,
+                ],
+                [
+                    gpu.pipeline(&r::BLEND_BWD_PX8_F0)?,
+                    gpu.pipeline(&r::BLEND_BWD_PX8_F2)?,
+                    gpu.pipeline(&r::BLEND_BWD_PX8_F3)?,
+                ],
             ],
+            blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
             project_bwd: gpu.pipeline(&r::PROJECT_BWD)?,
             scan: PrefixSum::new(gpu)?,
             sort: RadixSort::new(gpu)?,
         })
+    }
+
+    /// The blend-backward variant `backward` records.
+    pub fn blend_bwd_variant(&self) -> BlendBwdVariant {
+        self.blend_bwd_variant
+    }
+
+    /// Chooses the blend-backward variant (benches and tests compare them on one device).
+    pub fn set_blend_bwd_variant(&mut self, v: BlendBwdVariant) {
+        self.blend_bwd_variant = v;
     }
 
     /// Buffers for `s.max_gaussians` splats on a `s.width`×`s.height` image (grown by
@@ -563,7 +628,10 @@ impl Rasterizer {
             binds.extend([f, df, b.d_features.all()]);
         }
         rec.dispatch(
-            &self.blend_bwd[variant(g.feature_dims()).unwrap()],
+            &self.blend_bwd[BlendBwdVariant::ALL
+                .iter()
+                .position(|&v| v == self.blend_bwd_variant)
+                .unwrap()][variant(g.feature_dims()).unwrap()],
             &bp,
             &binds,
             [tx.max(1), ty.max(1), 1],
