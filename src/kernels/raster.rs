@@ -2,7 +2,8 @@
 //!
 //! Forward: `project` → scan of tiles touched → `bin_total` → `bin_emit` ((tile | depth) keys)
 //! → radix sort (only `32 + tile_bits` bits) → `bin_ranges` → `blend_fwd`.
-//! Backward: `blend_bwd` (accumulates per-splat 2D gradients) → `project_bwd`.
+//! Backward: `blend_bwd` (accumulates per-splat 2D gradients; one of `BlendBwdVariant`) →
+//! `project_bwd`.
 //! Nothing is read back inside a pass; the intersection count drives the sort and the range
 //! pass on the GPU. Overflow of the intersection capacity is detected after the submit
 //! (`RasterBuffers::intersections`) and `render_checked` re-runs with grown buffers, so a splat
@@ -267,7 +268,8 @@ fn sort_bits(cam: &Camera) -> u32 {
 }
 
 /// How `blend_bwd` folds per-pixel gradient terms into per-splat sums. All variants compute
-/// the same sums (up to float summation order); they differ in speed per device.
+/// the same sums (up to float summation order; tests compare every variant with the twin);
+/// they differ in speed per device. Discriminants index `Rasterizer::blend_bwd`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BlendBwdVariant {
     /// 16×16 invocations per tile, splats staged in shared memory; per splat, one subgroupAdd
@@ -276,19 +278,16 @@ pub enum BlendBwdVariant {
     /// 8 invocations per tile, 32 pixels each; per splat, the terms are summed over the whole
     /// tile and added with one atomic per component (`blend_bwd_tile.glsl`). CPU-shaped.
     TileAccum,
-    /// As `TileAccum` with 32 invocations of 8 pixels each.
-    TileAccum8,
 }
 
 impl BlendBwdVariant {
-    pub const ALL: [BlendBwdVariant; 3] = [
-        BlendBwdVariant::SubgroupAtomic,
-        BlendBwdVariant::TileAccum,
-        BlendBwdVariant::TileAccum8,
-    ];
+    pub const ALL: [BlendBwdVariant; 2] =
+        [BlendBwdVariant::SubgroupAtomic, BlendBwdVariant::TileAccum];
 
-    /// The default for a device: per-tile accumulation on CPU devices (lavapipe), where it
-    /// measured fastest; the subgroup kernel elsewhere.
+    /// The default for a device: per-tile accumulation on CPU devices (lavapipe: 10–14× the
+    /// subgroup kernel on the issue-14 scenes, `bench --suite raster`); the subgroup kernel on
+    /// GPUs, where an 8-invocation workgroup per tile would leave most of a warp idle (not
+    /// measured there yet).
     pub fn for_device(info: &crate::vk::DeviceInfo) -> Self {
         if info.kind == "CPU" {
             BlendBwdVariant::TileAccum
@@ -301,7 +300,6 @@ impl BlendBwdVariant {
         match self {
             BlendBwdVariant::SubgroupAtomic => "subgroup-atomic",
             BlendBwdVariant::TileAccum => "tile-accum",
-            BlendBwdVariant::TileAccum8 => "tile-accum8",
         }
     }
 }
@@ -312,8 +310,8 @@ pub struct Rasterizer {
     bin_emit: ComputePipeline,
     bin_ranges: ComputePipeline,
     blend_fwd: [ComputePipeline; 3],
-    /// Per variant (`BlendBwdVariant::ALL` order), per feature count.
-    blend_bwd: Vec<[ComputePipeline; 3]>,
+    /// Per variant (its discriminant), per feature count.
+    blend_bwd: [[ComputePipeline; 3]; 2],
     blend_bwd_variant: BlendBwdVariant,
     project_bwd: ComputePipeline,
     scan: PrefixSum,
@@ -346,21 +344,16 @@ impl Rasterizer {
                 gpu.pipeline(&r::BLEND_FWD_F2)?,
                 gpu.pipeline(&r::BLEND_FWD_F3)?,
             ],
-            blend_bwd: vec![
+            blend_bwd: [
                 [
                     gpu.pipeline(&r::BLEND_BWD_F0)?,
                     gpu.pipeline(&r::BLEND_BWD_F2)?,
                     gpu.pipeline(&r::BLEND_BWD_F3)?,
                 ],
                 [
-                    gpu.pipeline(&r::BLEND_BWD_PX32_F0)?,
-                    gpu.pipeline(&r::BLEND_BWD_PX32_F2)?,
-                    gpu.pipeline(&r::BLEND_BWD_PX32_F3)?,
-                ],
-                [
-                    gpu.pipeline(&r::BLEND_BWD_PX8_F0)?,
-                    gpu.pipeline(&r::BLEND_BWD_PX8_F2)?,
-                    gpu.pipeline(&r::BLEND_BWD_PX8_F3)?,
+                    gpu.pipeline(&r::BLEND_BWD_TILE_F0)?,
+                    gpu.pipeline(&r::BLEND_BWD_TILE_F2)?,
+                    gpu.pipeline(&r::BLEND_BWD_TILE_F3)?,
                 ],
             ],
             blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
@@ -628,10 +621,7 @@ impl Rasterizer {
             binds.extend([f, df, b.d_features.all()]);
         }
         rec.dispatch(
-            &self.blend_bwd[BlendBwdVariant::ALL
-                .iter()
-                .position(|&v| v == self.blend_bwd_variant)
-                .unwrap()][variant(g.feature_dims()).unwrap()],
+            &self.blend_bwd[self.blend_bwd_variant as usize][variant(g.feature_dims()).unwrap()],
             &bp,
             &binds,
             [tx.max(1), ty.max(1), 1],
