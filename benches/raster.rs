@@ -26,11 +26,14 @@ fn benches(c: &mut Criterion) {
         counts.push(1_000_000);
         resolutions.push(1024);
     }
-    let cases: Vec<(u32, u32)> = counts
+    let mut cases: Vec<(u32, u32)> = counts
         .iter()
         .map(|&n| (n, 256))
         .chain(resolutions.iter().map(|&r| (10_000, r)))
         .collect();
+    // (10^4, 256²) is in both sweeps; criterion panics on a repeated benchmark id.
+    let mut seen = std::collections::HashSet::new();
+    cases.retain(|c| seen.insert(*c));
     for (name, bwd) in [("raster_forward", false), ("raster_forward_backward", true)] {
         let mut g = c.benchmark_group(name);
         g.sample_size(10)
