@@ -4,11 +4,16 @@
 //!
 //!     cargo bench --bench raster                       # 10^3..10^5, 128²..512²
 //!     DISPFLOW_BENCH_LARGE=1 cargo bench --bench raster # adds 10^6 and 1024² (use a GPU)
+//!
+//! `blend_backward` times the blend-backward dispatch alone, every `BlendBwdVariant` on the
+//! issue-14 scenes (D-NeRF-like 114×114 with 20k Gaussians, built-in 160×120 with 10k).
 
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use dispflow_vk::bench::raster_scenes::RasterScene;
 use dispflow_vk::bench::RasterCase;
+use dispflow_vk::kernels::raster::BlendBwdVariant;
 use dispflow_vk::vk::Gpu;
 
 fn benches(c: &mut Criterion) {
@@ -21,11 +26,14 @@ fn benches(c: &mut Criterion) {
         counts.push(1_000_000);
         resolutions.push(1024);
     }
-    let cases: Vec<(u32, u32)> = counts
+    let mut cases: Vec<(u32, u32)> = counts
         .iter()
         .map(|&n| (n, 256))
         .chain(resolutions.iter().map(|&r| (10_000, r)))
         .collect();
+    // (10^4, 256²) is in both sweeps; criterion panics on a repeated benchmark id.
+    let mut seen = std::collections::HashSet::new();
+    cases.retain(|c| seen.insert(*c));
     for (name, bwd) in [("raster_forward", false), ("raster_forward_backward", true)] {
         let mut g = c.benchmark_group(name);
         g.sample_size(10)
@@ -46,6 +54,35 @@ fn benches(c: &mut Criterion) {
         }
         g.finish();
     }
+    let mut g = c.benchmark_group("blend_backward");
+    g.sample_size(10)
+        .warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_secs(3));
+    for scene in [RasterScene::Dnerf, RasterScene::Builtin] {
+        let (h, cam) = scene.build();
+        let mut case = RasterCase::from_host(&gpu, &h, cam).expect("raster case");
+        for v in BlendBwdVariant::ALL {
+            case.set_blend_bwd_variant(v);
+            let id = BenchmarkId::new(v.name(), scene.label());
+            g.bench_function(id, |b| {
+                b.iter_custom(|iters| {
+                    (0..iters)
+                        .map(|_| {
+                            let t = case.run_backward(&gpu).unwrap();
+                            let ms: f64 = t
+                                .by_label()
+                                .iter()
+                                .filter(|(l, _)| l.starts_with("blend_bwd"))
+                                .map(|(_, ms)| ms)
+                                .sum();
+                            Duration::from_secs_f64(ms * 1e-3)
+                        })
+                        .sum()
+                })
+            });
+        }
+    }
+    g.finish();
 }
 
 criterion_group!(raster, benches);

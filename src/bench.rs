@@ -8,12 +8,15 @@
 use crate::error::{Error, Result};
 use crate::kernels::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use crate::kernels::raster::{
-    split_sh, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
+    split_sh, BlendBwdVariant, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer,
+    RenderOpts, SplatInputs,
 };
 use crate::kernels::scan::{Count, PrefixSum, ScanScratch};
 use crate::reference;
 use crate::testing::Noise;
 use crate::vk::{Buffer, Gpu, Recorder, Timings};
+
+pub mod raster_scenes;
 
 /// Key distributions for the sort benchmark.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -198,22 +201,18 @@ pub struct RasterCase {
 
 impl RasterCase {
     pub fn new(gpu: &Gpu, n: u32, res: u32) -> Result<Self> {
-        let rast = Rasterizer::new(gpu)?;
         let mut r = Noise::new(n as u64 ^ res as u64);
         let mut u = move || (r.next_u32() as f32 + 0.5) / 4_294_967_296.0;
         let s = 0.6 / (n as f32).cbrt();
-        let mut means = Vec::with_capacity(3 * n as usize);
-        let mut scales = Vec::with_capacity(3 * n as usize);
-        let mut quats = Vec::with_capacity(4 * n as usize);
-        let mut logits = Vec::with_capacity(n as usize);
-        let mut sh = Vec::with_capacity(48 * n as usize);
+        let mut h = raster_scenes::HostSplats::default();
         for _ in 0..n {
             let z = 2.0 + 4.0 * u();
-            means.extend([(u() - 0.5) * z, (u() - 0.5) * z, z]);
-            scales.extend([s * (0.3 + u()), s * (0.3 + u()), s * (0.3 + u())]);
-            quats.extend([u() - 0.5, u() - 0.5, u() - 0.5, u() - 0.5]);
-            logits.push(2.0 * u() - 1.0);
-            sh.extend((0..48).map(|_| 0.3 * (u() - 0.5)));
+            h.means.extend([(u() - 0.5) * z, (u() - 0.5) * z, z]);
+            h.scales
+                .extend([s * (0.3 + u()), s * (0.3 + u()), s * (0.3 + u())]);
+            h.quats.extend([u() - 0.5, u() - 0.5, u() - 0.5, u() - 0.5]);
+            h.logits.push(2.0 * u() - 1.0);
+            h.sh.extend((0..48).map(|_| 0.3 * (u() - 0.5)));
         }
         let cam = Camera {
             rot: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
@@ -226,15 +225,23 @@ impl RasterCase {
             height: res,
             near: 0.01,
         };
+        Self::from_host(gpu, &h, cam)
+    }
+
+    /// A case from host-side Gaussians (SH degree 3) and a camera; renders once.
+    pub fn from_host(gpu: &Gpu, h: &raster_scenes::HostSplats, cam: Camera) -> Result<Self> {
+        let rast = Rasterizer::new(gpu)?;
+        let n = h.logits.len() as u32;
+        let (dc, rest) = split_sh(&h.sh, 16);
         let inputs = [
-            gpu.buffer_from("bench means", &means)?,
-            gpu.buffer_from("bench scales", &scales)?,
-            gpu.buffer_from("bench quats", &quats)?,
-            gpu.buffer_from("bench logits", &logits)?,
-            gpu.buffer_from("bench sh dc", &split_sh(&sh, 16).0)?,
-            gpu.buffer_from("bench sh rest", &split_sh(&sh, 16).1)?,
+            gpu.buffer_from("bench means", &h.means)?,
+            gpu.buffer_from("bench scales", &h.scales)?,
+            gpu.buffer_from("bench quats", &h.quats)?,
+            gpu.buffer_from("bench logits", &h.logits)?,
+            gpu.buffer_from("bench sh dc", &dc)?,
+            gpu.buffer_from("bench sh rest", &rest)?,
         ];
-        let px = (res * res) as usize;
+        let px = (cam.width * cam.height) as usize;
         let d_rgba = gpu.buffer_from(
             "bench d rgba",
             &(0..4 * px)
@@ -244,8 +251,8 @@ impl RasterCase {
         let d_depth = gpu.buffer_from("bench d depth", &vec![0f32; px])?;
         let size = RasterSize {
             max_gaussians: n,
-            width: res,
-            height: res,
+            width: cam.width,
+            height: cam.height,
             sh_coeffs: 16,
             feature_dims: 0,
             isect_capacity: 4 * n,
@@ -266,7 +273,7 @@ impl RasterCase {
             d_rgba,
             d_depth,
             n,
-            res,
+            res: cam.width,
         })
     }
 
@@ -290,8 +297,42 @@ impl RasterCase {
         rec.finish()
     }
 
+    /// Backward only, of the forward pass `new` rendered (its outputs stay in the buffers).
+    pub fn run_backward(&self, gpu: &Gpu) -> Result<Timings> {
+        let g = splat_inputs(&self.inputs, self.n);
+        let mut rec = Recorder::timed(gpu)?;
+        let d = OutputGrads {
+            rgba: self.d_rgba.all(),
+            depth: Some(self.d_depth.all()),
+            features: None,
+        };
+        self.rast.backward(
+            &mut rec,
+            &self.bufs,
+            &self.cam,
+            &g,
+            &RenderOpts::default(),
+            &d,
+        );
+        rec.finish()
+    }
+
     pub fn intersections(&self, gpu: &Gpu) -> Result<u32> {
         self.bufs.intersections(gpu)
+    }
+
+    /// The 2D gradients of the last backward, [n, G2D_STRIDE].
+    pub fn grad2d(&self, gpu: &Gpu) -> Result<Vec<f32>> {
+        gpu.read(
+            self.bufs
+                .grad2d
+                .elems::<f32>(0, self.n as u64 * crate::kernels::raster::G2D_STRIDE),
+        )
+    }
+
+    /// The blend-backward variant the next `run` records.
+    pub fn set_blend_bwd_variant(&mut self, v: BlendBwdVariant) {
+        self.rast.set_blend_bwd_variant(v);
     }
 }
 
@@ -362,6 +403,14 @@ pub struct BenchArgs {
     /// Rasteriser: square image sizes in pixels (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "128,256")]
     pub resolutions: Vec<u32>,
+    /// Rasteriser: issue-14 scenes timed for blend backward, every variant (comma-separated).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "dnerf,builtin"
+    )]
+    pub raster_scenes: Vec<raster_scenes::RasterScene>,
     /// Also write the rows as JSON to this file.
     #[arg(long)]
     pub json: Option<std::path::PathBuf>,
@@ -453,14 +502,18 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
     if has(Suite::Raster) {
         for &res in &args.resolutions {
             for &n in &args.gaussians {
-                let case = RasterCase::new(&gpu, n, res)?;
+                let mut case = RasterCase::new(&gpu, n, res)?;
                 let isect = case.intersections(&gpu)?;
-                for bwd in [false, true] {
-                    let (med, stages) = measure(args.reps, || case.run(&gpu, bwd))?;
+                let runs = std::iter::once(None).chain(BlendBwdVariant::ALL.map(Some));
+                for bwd in runs {
+                    if let Some(v) = bwd {
+                        case.set_blend_bwd_variant(v);
+                    }
+                    let (med, stages) = measure(args.reps, || case.run(&gpu, bwd.is_some()))?;
                     rows.push(BenchRow {
                         kernel: format!(
                             "raster {} {res}² ({isect} tile hits)",
-                            if bwd { "fwd+bwd" } else { "fwd" }
+                            bwd.map_or("fwd".into(), |v| format!("fwd+bwd {}", v.name()))
                         ),
                         n,
                         median_ms: med,
@@ -470,6 +523,13 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
                 }
             }
         }
+    }
+    if has(Suite::Raster) {
+        rows.extend(raster_scenes::blend_bwd_rows(
+            &gpu,
+            &args.raster_scenes,
+            args.reps,
+        )?);
     }
     println!("\n| kernel | n | median GPU ms | M elements/s | time share by stage |");
     println!("|---|---:|---:|---:|---|");

@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use dispflow_vk::kernels::raster::{
-    join_sh, split_sh, Camera, OutputGrads, RasterSize, Rasterizer, RenderOpts, SplatInputs,
-    G2D_STRIDE,
+    join_sh, split_sh, BlendBwdVariant, Camera, OutputGrads, RasterSize, Rasterizer, RenderOpts,
+    SplatInputs, G2D_STRIDE,
 };
 use dispflow_vk::testing;
 use dispflow_vk::vk::Recorder;
@@ -84,7 +84,7 @@ fn assert_close(what: &str, got: &[f32], want: &[f32], abs: f32, rel: f32) {
 fn run(name: &str) {
     let Some(c) = Case::load(name) else { return };
     let gpu = testing::gpu();
-    let rast = Rasterizer::new(&gpu).unwrap();
+    let mut rast = Rasterizer::new(&gpu).unwrap();
     let n = c.get("opacities").len() as u32;
     let scales: Vec<f32> = c.get("scales").iter().map(|s| s.exp()).collect();
     let means = gpu.buffer_from("means", c.get("means")).unwrap();
@@ -150,71 +150,77 @@ fn run(name: &str) {
             &vec![0f32; (cam.width * cam.height) as usize],
         )
         .unwrap();
-    let mut rec = Recorder::new(&gpu).unwrap();
-    rast.backward(
-        &mut rec,
-        &b,
-        &cam,
-        &g,
-        &opts,
-        &OutputGrads {
-            rgba: d_rgba.all(),
-            depth: Some(d_depth.all()),
-            features: None,
-        },
-    );
-    rec.finish().unwrap();
-    let g2: Vec<f32> = gpu.read(b.grad2d.all()).unwrap();
-    let s = G2D_STRIDE as usize;
-    let v_xy: Vec<f32> = (0..n as usize)
-        .flat_map(|i| [g2[s * i], g2[s * i + 1]])
-        .collect();
-    let v_con: Vec<f32> = (0..n as usize)
-        .flat_map(|i| [g2[s * i + 2], g2[s * i + 3], g2[s * i + 4]])
-        .collect();
-    // Stored gradients carry ~4 significant digits (README): rel 2e-3, abs 1e-7.
-    let (abs, rel) = (1e-7, 2e-3);
-    assert_close("v_xy", &v_xy, c.get("v_xy"), abs, rel);
-    assert_close("v_conics", &v_con, c.get("v_conics"), abs, rel);
-    let rd = |buf: &dispflow_vk::vk::Buffer, len: usize| -> Vec<f32> {
-        gpu.read::<f32>(buf.all()).unwrap()[..len].to_vec()
-    };
-    let nn = n as usize;
-    assert_close(
-        "v_means",
-        &rd(&b.d_means, 3 * nn),
-        c.get("v_means"),
-        abs,
-        rel,
-    );
-    // gsplat differentiates log-scales: ∂L/∂log s = s · ∂L/∂s.
-    let v_log: Vec<f32> = rd(&b.d_scales, 3 * nn)
-        .iter()
-        .zip(&scales)
-        .map(|(g, s)| g * s)
-        .collect();
-    assert_close("v_scales", &v_log, c.get("v_scales"), abs, rel);
-    assert_close(
-        "v_quats",
-        &rd(&b.d_quats, 4 * nn),
-        c.get("v_quats"),
-        abs,
-        rel,
-    );
-    assert_close(
-        "v_opacities",
-        &rd(&b.d_opacity_logits, nn),
-        c.get("v_opacities"),
-        abs,
-        rel,
-    );
-    assert_close(
-        "v_coeffs",
-        &join_sh(&rd(&b.d_sh_dc, 3 * nn), &rd(&b.d_sh_rest, 45 * nn), 16),
-        c.get("v_coeffs"),
-        abs,
-        rel,
-    );
+    // Every blend-backward variant against the oracle.
+    for v in BlendBwdVariant::ALL {
+        rast.set_blend_bwd_variant(v);
+        let what = |x: &str| format!("blend_bwd {}: {x}", v.name());
+        testing::fill_noise(&gpu, &b.grad2d, 8);
+        let mut rec = Recorder::new(&gpu).unwrap();
+        rast.backward(
+            &mut rec,
+            &b,
+            &cam,
+            &g,
+            &opts,
+            &OutputGrads {
+                rgba: d_rgba.all(),
+                depth: Some(d_depth.all()),
+                features: None,
+            },
+        );
+        rec.finish().unwrap();
+        let g2: Vec<f32> = gpu.read(b.grad2d.all()).unwrap();
+        let s = G2D_STRIDE as usize;
+        let v_xy: Vec<f32> = (0..n as usize)
+            .flat_map(|i| [g2[s * i], g2[s * i + 1]])
+            .collect();
+        let v_con: Vec<f32> = (0..n as usize)
+            .flat_map(|i| [g2[s * i + 2], g2[s * i + 3], g2[s * i + 4]])
+            .collect();
+        // Stored gradients carry ~4 significant digits (README): rel 2e-3, abs 1e-7.
+        let (abs, rel) = (1e-7, 2e-3);
+        assert_close(&what("v_xy"), &v_xy, c.get("v_xy"), abs, rel);
+        assert_close(&what("v_conics"), &v_con, c.get("v_conics"), abs, rel);
+        let rd = |buf: &dispflow_vk::vk::Buffer, len: usize| -> Vec<f32> {
+            gpu.read::<f32>(buf.all()).unwrap()[..len].to_vec()
+        };
+        let nn = n as usize;
+        assert_close(
+            &what("v_means"),
+            &rd(&b.d_means, 3 * nn),
+            c.get("v_means"),
+            abs,
+            rel,
+        );
+        // gsplat differentiates log-scales: ∂L/∂log s = s · ∂L/∂s.
+        let v_log: Vec<f32> = rd(&b.d_scales, 3 * nn)
+            .iter()
+            .zip(&scales)
+            .map(|(g, s)| g * s)
+            .collect();
+        assert_close(&what("v_scales"), &v_log, c.get("v_scales"), abs, rel);
+        assert_close(
+            &what("v_quats"),
+            &rd(&b.d_quats, 4 * nn),
+            c.get("v_quats"),
+            abs,
+            rel,
+        );
+        assert_close(
+            &what("v_opacities"),
+            &rd(&b.d_opacity_logits, nn),
+            c.get("v_opacities"),
+            abs,
+            rel,
+        );
+        assert_close(
+            &what("v_coeffs"),
+            &join_sh(&rd(&b.d_sh_dc, 3 * nn), &rd(&b.d_sh_rest, 45 * nn), 16),
+            c.get("v_coeffs"),
+            abs,
+            rel,
+        );
+    }
 }
 
 #[test]

@@ -41,7 +41,7 @@ fn close_abs(what: &str, got: &[f32], want: &[f32], abs: f32, rel: f32) {
 
 fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
     let gpu = testing::gpu();
-    let rast = Rasterizer::new(&gpu).unwrap();
+    let mut rast = Rasterizer::new(&gpu).unwrap();
     let scene = random_scene(seed, n, sh_degree, k);
     let cam = camera(w, h);
     let opts = RenderOpts {
@@ -162,8 +162,16 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
     );
 
     let u = upstream(seed + 100, px, k as usize);
-    let grads = backward(&gpu, &rast, &b, &cam, &up, &opts, &u);
     let bg = twin_blend_bwd(&bp, &proj, &scene.features, &fwd, &u);
+    let pg = twin::project_bwd(&tcam, &g, &proj, &bg);
+    for (v, grads) in backward_each(&gpu, &mut rast, &b, &cam, &up, &opts, &u) {
+        let ctx = format!("{ctx}, blend_bwd {}", v.name());
+        check_grads(&ctx, n, &grads, &bg, &pg);
+    }
+}
+
+/// Every gradient of one backward run against the twin's.
+fn check_grads(ctx: &str, n: usize, grads: &Grads, bg: &twin::BlendGrads, pg: &twin::ProjectGrads) {
     let s = G2D_STRIDE as usize;
     let col = |lo: usize, hi: usize| -> Vec<f32> {
         (0..n)
@@ -193,7 +201,6 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
         &bg.features,
     );
 
-    let pg = twin::project_bwd(&tcam, &g, &proj, &bg);
     close_kind(
         &format!("{ctx}: d means"),
         &grads.d_means,

@@ -2,7 +2,8 @@
 //!
 //! Forward: `project` → scan of tiles touched → `bin_total` → `bin_emit` ((tile | depth) keys)
 //! → radix sort (only `32 + tile_bits` bits) → `bin_ranges` → `blend_fwd`.
-//! Backward: `blend_bwd` (accumulates per-splat 2D gradients) → `project_bwd`.
+//! Backward: `blend_bwd` (accumulates per-splat 2D gradients; one of `BlendBwdVariant`) →
+//! `project_bwd`.
 //! Nothing is read back inside a pass; the intersection count drives the sort and the range
 //! pass on the GPU. Overflow of the intersection capacity is detected after the submit
 //! (`RasterBuffers::intersections`) and `render_checked` re-runs with grown buffers, so a splat
@@ -266,13 +267,52 @@ fn sort_bits(cam: &Camera) -> u32 {
     32 + (32 - (tiles - 1).leading_zeros())
 }
 
+/// How `blend_bwd` folds per-pixel gradient terms into per-splat sums. All variants compute
+/// the same sums (up to float summation order; tests compare every variant with the twin);
+/// they differ in speed per device. Discriminants index `Rasterizer::blend_bwd`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BlendBwdVariant {
+    /// 16×16 invocations per tile, splats staged in shared memory; per splat, one subgroupAdd
+    /// and one float atomic per subgroup and component (`blend_bwd.glsl`). GPU-shaped.
+    SubgroupAtomic,
+    /// 8 invocations per tile, 32 pixels each; per splat, the terms are summed over the whole
+    /// tile and added with one atomic per component (`blend_bwd_tile.glsl`). CPU-shaped.
+    TileAccum,
+}
+
+impl BlendBwdVariant {
+    pub const ALL: [BlendBwdVariant; 2] =
+        [BlendBwdVariant::SubgroupAtomic, BlendBwdVariant::TileAccum];
+
+    /// The default for a device: per-tile accumulation on CPU devices (lavapipe: 10–14× the
+    /// subgroup kernel on the issue-14 scenes, `bench --suite raster`); the subgroup kernel on
+    /// GPUs, where an 8-invocation workgroup per tile would leave most of a warp idle (not
+    /// measured there yet).
+    pub fn for_device(info: &crate::vk::DeviceInfo) -> Self {
+        if info.kind == "CPU" {
+            BlendBwdVariant::TileAccum
+        } else {
+            BlendBwdVariant::SubgroupAtomic
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            BlendBwdVariant::SubgroupAtomic => "subgroup-atomic",
+            BlendBwdVariant::TileAccum => "tile-accum",
+        }
+    }
+}
+
 pub struct Rasterizer {
     project: ComputePipeline,
     bin_total: ComputePipeline,
     bin_emit: ComputePipeline,
     bin_ranges: ComputePipeline,
     blend_fwd: [ComputePipeline; 3],
-    blend_bwd: [ComputePipeline; 3],
+    /// Per variant (its discriminant), per feature count.
+    blend_bwd: [[ComputePipeline; 3]; 2],
+    blend_bwd_variant: BlendBwdVariant,
     project_bwd: ComputePipeline,
     scan: PrefixSum,
     sort: RadixSort,
@@ -305,14 +345,32 @@ impl Rasterizer {
                 gpu.pipeline(&r::BLEND_FWD_F3)?,
             ],
             blend_bwd: [
-                gpu.pipeline(&r::BLEND_BWD_F0)?,
-                gpu.pipeline(&r::BLEND_BWD_F2)?,
-                gpu.pipeline(&r::BLEND_BWD_F3)?,
+                [
+                    gpu.pipeline(&r::BLEND_BWD_F0)?,
+                    gpu.pipeline(&r::BLEND_BWD_F2)?,
+                    gpu.pipeline(&r::BLEND_BWD_F3)?,
+                ],
+                [
+                    gpu.pipeline(&r::BLEND_BWD_TILE_F0)?,
+                    gpu.pipeline(&r::BLEND_BWD_TILE_F2)?,
+                    gpu.pipeline(&r::BLEND_BWD_TILE_F3)?,
+                ],
             ],
+            blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
             project_bwd: gpu.pipeline(&r::PROJECT_BWD)?,
             scan: PrefixSum::new(gpu)?,
             sort: RadixSort::new(gpu)?,
         })
+    }
+
+    /// The blend-backward variant `backward` records.
+    pub fn blend_bwd_variant(&self) -> BlendBwdVariant {
+        self.blend_bwd_variant
+    }
+
+    /// Chooses the blend-backward variant (benches and tests compare them on one device).
+    pub fn set_blend_bwd_variant(&mut self, v: BlendBwdVariant) {
+        self.blend_bwd_variant = v;
     }
 
     /// Buffers for `s.max_gaussians` splats on a `s.width`×`s.height` image (grown by
@@ -563,7 +621,7 @@ impl Rasterizer {
             binds.extend([f, df, b.d_features.all()]);
         }
         rec.dispatch(
-            &self.blend_bwd[variant(g.feature_dims()).unwrap()],
+            &self.blend_bwd[self.blend_bwd_variant as usize][variant(g.feature_dims()).unwrap()],
             &bp,
             &binds,
             [tx.max(1), ty.max(1), 1],

@@ -2,8 +2,8 @@
 #![allow(dead_code)]
 
 use dispflow_vk::kernels::raster::{
-    join_sh, split_sh, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer, RenderOpts,
-    SplatInputs,
+    join_sh, split_sh, BlendBwdVariant, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer,
+    RenderOpts, SplatInputs,
 };
 use dispflow_vk::testing::{self, Noise, TestGpu};
 use dispflow_vk::vk::{Buffer, Recorder};
@@ -269,6 +269,29 @@ pub fn backward(
             up.sh_coeffs as usize,
         ),
     }
+}
+
+/// [`backward`] once per blend-backward variant (every GPU-vs-twin comparison runs them all);
+/// leaves `rast` on its default variant.
+pub fn backward_each(
+    gpu: &TestGpu,
+    rast: &mut Rasterizer,
+    b: &RasterBuffers,
+    cam: &Camera,
+    up: &Uploaded,
+    opts: &RenderOpts,
+    u: &Upstream,
+) -> Vec<(BlendBwdVariant, Grads)> {
+    let default = rast.blend_bwd_variant();
+    let out = BlendBwdVariant::ALL
+        .iter()
+        .map(|&v| {
+            rast.set_blend_bwd_variant(v);
+            (v, backward(gpu, rast, b, cam, up, opts, u))
+        })
+        .collect();
+    rast.set_blend_bwd_variant(default);
+    out
 }
 
 /// Deterministic upstream gradients for `px` pixels and `k` feature channels.
