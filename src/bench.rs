@@ -590,13 +590,14 @@ fn merge_stages(stages: Vec<(String, f64)>) -> Vec<(String, f64)> {
 
 use crate::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
 use crate::kernels::mlp_fused::{FmaPeak, MlpFused, Precision};
+use crate::kernels::mlp_rows::MlpKernels;
 use crate::model::deform::{LinearRole, LinearSpec, MlpConfig, MlpLayout};
 
 /// Which MLP implementation a case runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MlpImpl {
     /// Layer-wise tiled GEMMs, activations stored (forward and backward).
-    Layerwise,
+    Layerwise(MlpKernels),
     /// Fused whole-network forward, f32, no stored activations (forward only).
     Fused,
     /// Fused forward with fp16 weights/activations, f32 arithmetic (forward only).
@@ -668,8 +669,8 @@ impl MlpCase {
         let d_out: Vec<f32> = (0..10 * n).map(|_| unif(-1.0, 1.0)).collect();
         let params_host = lay.init_params(1);
         let (layerwise, fused) = match imp {
-            MlpImpl::Layerwise => {
-                let m = Mlp::new(gpu, cfg)?;
+            MlpImpl::Layerwise(k) => {
+                let m = Mlp::with_kernels(gpu, cfg, k)?;
                 let b = m.buffers(gpu, n)?;
                 (Some((m, b)), None)
             }
@@ -792,7 +793,7 @@ impl MlpCase {
     /// the layer-wise path; nothing for the fused forward).
     pub fn bytes_per_gaussian(&self) -> u64 {
         match self.imp {
-            MlpImpl::Layerwise => MlpBuffers::bytes_per_gaussian(&self.cfg),
+            MlpImpl::Layerwise(_) => MlpBuffers::bytes_per_gaussian(&self.cfg),
             _ => 0,
         }
     }
@@ -925,7 +926,7 @@ pub fn mlp_row(
         Ok(median(v))
     };
     let fwd_ms = timed(&|| case.run_forward(gpu))?;
-    let train_ms = if imp == MlpImpl::Layerwise {
+    let train_ms = if matches!(imp, MlpImpl::Layerwise(_)) {
         Some(timed(&|| Ok(case.run_train(gpu)?.unwrap_or_default()))?)
     } else {
         None

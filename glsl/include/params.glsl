@@ -98,6 +98,24 @@ struct MlpRowsParams {
     uint pad;
 };
 
+// src/kernels/mlp.rs, register path (linear_bwd_weight_rows): for one window of rows,
+//   partial[o][c] (+)= Σ_{r < rows} dz[r0 + r][o] · [A | B | 1][r0 + r][c],
+// dz rows from the uniform-buffer window (row r at dz_res + r·dz_stride floats).
+struct MlpRowsWeightParams {
+    uint r0;
+    uint rows;
+    uint fan_in;
+    uint fan_out;
+    uint ka;
+    uint a_stride;
+    uint b_stride;
+    uint dz_stride;
+    uint dz_res;
+    uint accumulate; // 0 for the first window
+    uint pad0;
+    uint pad1;
+};
+
 // src/kernels/mlp.rs: wt[w_off + c·fan_out + o] = W[o][c] (the backward's weight windows).
 struct MlpTransposeParams {
     uint fan_in;

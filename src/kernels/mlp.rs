@@ -131,6 +131,10 @@ pub struct Mlp {
 /// `partials` [MAX_CHUNKS][max fan_out·(fan_in + 1)].
 pub struct MlpBuffers {
     pub capacity: u32,
+    /// Most rows one dispatch binds (the storage-buffer range over the widest row).
+    pub chunk_rows: u32,
+    /// Floats per row of x0, enc_t, ht, h[i], dz, dtf (0: unused placeholder).
+    row_floats: [u32; 6],
     pub x0: Buffer,
     pub enc_t: Buffer,
     pub ht: Buffer,
@@ -168,6 +172,58 @@ impl MlpBuffers {
         b += self.h.iter().map(|x| x.size()).sum::<u64>();
         b + self.dz[0].size() + self.dz[1].size() + self.partials.size()
     }
+}
+
+/// The rows `[r0, r0 + rows)` of every per-Gaussian tensor of [`MlpBuffers`], as bound by one
+/// chunk's dispatches.
+struct Acts<'a> {
+    x0: BufSlice<'a>,
+    enc_t: BufSlice<'a>,
+    ht: BufSlice<'a>,
+    h: Vec<BufSlice<'a>>,
+    dz: [BufSlice<'a>; 2],
+    dtf: BufSlice<'a>,
+}
+
+impl MlpBuffers {
+    fn rows(&self, r0: u32, rows: u32) -> Acts<'_> {
+        let [x0, enc_t, ht, h, dz, dtf] = self.row_floats;
+        fn view(b: &Buffer, floats: u32, r0: u32, rows: u32) -> BufSlice<'_> {
+            if floats == 0 {
+                return b.all(); // an unused placeholder
+            }
+            let f = floats as u64 * 4;
+            b.slice(r0 as u64 * f, rows.max(1) as u64 * f)
+        }
+        let v = |b, floats| view(b, floats, r0, rows);
+        Acts {
+            x0: v(&self.x0, x0),
+            enc_t: v(&self.enc_t, enc_t),
+            ht: v(&self.ht, ht),
+            h: self.h.iter().map(|b| v(b, h)).collect(),
+            dz: [v(&self.dz[0], dz), v(&self.dz[1], dz)],
+            dtf: v(&self.dtf, dtf),
+        }
+    }
+
+    /// `(first row, rows)` of each chunk of an `n`-row batch; one empty chunk when `n` = 0.
+    fn chunks(&self, n: u32) -> Vec<(u32, u32)> {
+        if n == 0 {
+            return vec![(0, 0)];
+        }
+        (0..n)
+            .step_by(self.chunk_rows as usize)
+            .map(|r0| (r0, self.chunk_rows.min(n - r0)))
+            .collect()
+    }
+}
+
+/// `rows` rows of `floats` floats from row `r0` of `s`.
+fn sub(s: BufSlice<'_>, r0: u32, rows: u32, floats: u64) -> BufSlice<'_> {
+    s.buf.slice(
+        s.offset + r0 as u64 * floats * 4,
+        rows.max(1) as u64 * floats * 4,
+    )
 }
 
 /// Row-tile grid: y up to 65535, the rest in z.
@@ -228,23 +284,34 @@ impl Mlp {
     }
 
     /// Allocates activations and scratch for up to `capacity` Gaussians. Each activation
-    /// tensor is one buffer bound whole, so `capacity · max(width, in_dims, hidden) · 4` must
-    /// fit the device's storage-buffer range (lavapipe 128 MiB: 131 072 Gaussians at width
-    /// 256); larger batches are run in chunks by the caller.
+    /// tensor is one buffer; batches whose rows exceed the device's storage-buffer range
+    /// (lavapipe 128 MiB: 131 072 Gaussians at width 256) run in chunks of rows.
     pub fn buffers(&self, gpu: &Gpu, capacity: u32) -> Result<MlpBuffers> {
+        self.buffers_with_binding_limit(gpu, capacity, gpu.info.max_storage_buffer_range as u64)
+    }
+
+    /// [`Mlp::buffers`] with chunks sized for at most `binding` bytes per bound tensor (tests
+    /// force many chunks on small batches).
+    pub fn buffers_with_binding_limit(
+        &self,
+        gpu: &Gpu,
+        capacity: u32,
+        binding: u64,
+    ) -> Result<MlpBuffers> {
         let cfg = self.cfg();
         let (w, ind, hid) = (cfg.width as u64, cfg.in_dims() as u64, self.hidden() as u64);
-        // The widest per-Gaussian tensor bound as one storage buffer.
-        let widest = w.max(ind).max(hid);
-        let range = gpu.info.max_storage_buffer_range as u64;
-        let cap = capacity.max(1) as u64;
-        if cap * widest * 4 > range {
+        // The widest per-Gaussian row bound as one storage buffer; chunks start at multiples of
+        // 64 rows so every offset is 256-byte aligned.
+        let widest = w.max(ind).max(hid).max(OUT_DIMS as u64);
+        let chunk_rows = (binding / (widest * 4)) / 64 * 64;
+        if chunk_rows == 0 {
             return Err(Error::Capacity {
-                what: "MLP activations (one tensor must fit maxStorageBufferRange)",
-                capacity: range / (widest * 4),
+                what: "MLP activations (64 rows must fit maxStorageBufferRange)",
+                capacity: 0,
                 asked: capacity as u64,
             });
         }
+        let cap = capacity.max(1) as u64;
         let tn = cfg.time_net();
         let f = |name: &str, floats: u64| gpu.buffer(name, floats.max(1) * 4);
         let max_linear = self
@@ -256,6 +323,15 @@ impl Mlp {
             .unwrap();
         Ok(MlpBuffers {
             capacity,
+            chunk_rows: chunk_rows.min(u32::MAX as u64) as u32,
+            row_floats: [
+                ind as u32,
+                if tn { cfg.t_enc_dims() as u32 } else { 0 },
+                if tn { hid as u32 } else { 0 },
+                w as u32,
+                w.max(hid) as u32,
+                if tn { cfg.t_feat_dims() as u32 } else { 0 },
+            ],
             x0: f("mlp x0", cap * ind)?,
             enc_t: f(
                 "mlp enc_t",
@@ -303,7 +379,6 @@ impl Mlp {
         params: BufSlice<'_>,
         out: BufSlice<'_>,
     ) {
-        let cfg = *self.cfg();
         assert!(
             n <= b.capacity,
             "MLP forward of {n} rows, capacity {}",
@@ -321,6 +396,31 @@ impl Mlp {
                 (1, 0.0, s)
             }
         };
+        for (r0, rows) in b.chunks(n) {
+            let v = b.rows(r0, rows);
+            let times = if per_g == 1 {
+                sub(times, r0, rows, 1)
+            } else {
+                times
+            };
+            let io = (sub(xyz, r0, rows, 3), sub(out, r0, rows, OUT_DIMS as u64));
+            self.forward_chunk(rec, &v, rows, io.0, (per_g, t, times), params, io.1);
+        }
+    }
+
+    /// [`Mlp::forward`] of one chunk of rows.
+    #[allow(clippy::too_many_arguments)]
+    fn forward_chunk(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &Acts<'_>,
+        n: u32,
+        xyz: BufSlice<'_>,
+        (per_g, t, times): (u32, f32, BufSlice<'_>),
+        params: BufSlice<'_>,
+        out: BufSlice<'_>,
+    ) {
+        let cfg = *self.cfg();
         let ind = cfg.in_dims() as u32;
         let pc = MlpEncodeParams {
             n,
@@ -333,12 +433,7 @@ impl Mlp {
             time: t,
         };
         rec.set_zone("mlp fwd");
-        rec.dispatch_rows(
-            &self.encode,
-            &pc,
-            &[xyz, times, b.x0.all(), b.enc_t.all()],
-            n,
-        );
+        rec.dispatch_rows(&self.encode, &pc, &[xyz, times, b.x0, b.enc_t], n);
         let lin = |rec: &mut Recorder<'_>,
                    l: &LinearSpec,
                    a: (BufSlice<'_>, u32, u32),
@@ -350,39 +445,25 @@ impl Mlp {
         if cfg.time_net() {
             let tn = self.layout.time_net();
             let (ted, hid) = (cfg.t_enc_dims() as u32, self.hidden() as u32);
-            lin(
-                rec,
-                &tn[0],
-                (b.enc_t.all(), ted, ted),
-                None,
-                (b.ht.all(), hid, 0),
-                true,
-            );
+            lin(rec, &tn[0], (b.enc_t, ted, ted), None, (b.ht, hid, 0), true);
             let xd = cfg.x_dims() as u32;
-            lin(
-                rec,
-                &tn[1],
-                (b.ht.all(), hid, hid),
-                None,
-                (b.x0.all(), ind, xd),
-                false,
-            );
+            lin(rec, &tn[1], (b.ht, hid, hid), None, (b.x0, ind, xd), false);
         }
         let w = cfg.width;
         let skip_layer = cfg.skip.map(|s| s + 1);
         for (i, l) in self.layout.trunk().iter().enumerate() {
             let i = i as u32;
-            let dst = (b.h[i as usize].all(), w, 0);
+            let dst = (b.h[i as usize], w, 0);
             if i == 0 {
-                lin(rec, l, (b.x0.all(), ind, ind), None, dst, true);
+                lin(rec, l, (b.x0, ind, ind), None, dst, true);
             } else if skip_layer == Some(i) {
-                let prev = Some((b.h[i as usize - 1].all(), w));
-                lin(rec, l, (b.x0.all(), ind, ind), prev, dst, true);
+                let prev = Some((b.h[i as usize - 1], w));
+                lin(rec, l, (b.x0, ind, ind), prev, dst, true);
             } else {
-                lin(rec, l, (b.h[i as usize - 1].all(), w, w), None, dst, true);
+                lin(rec, l, (b.h[i as usize - 1], w, w), None, dst, true);
             }
         }
-        let last = b.h.last().unwrap().all();
+        let last = *b.h.last().unwrap();
         lin(
             rec,
             self.layout.head(),
@@ -468,7 +549,6 @@ impl Mlp {
         grads: BufSlice<'_>,
         accumulate: bool,
     ) {
-        let cfg = *self.cfg();
         assert!(
             n <= b.capacity,
             "MLP backward of {n} rows, capacity {}",
@@ -480,7 +560,6 @@ impl Mlp {
             grads.size >= total && params.size >= total,
             "grads {grads:?} or params {params:?} smaller than the layout"
         );
-        let (chunks, chunk_rows) = chunking(n);
         rec.set_zone("mlp bwd");
         if let Some(rp) = &self.rows {
             for l in &self.layout.linears {
@@ -488,6 +567,29 @@ impl Mlp {
                 rp.transpose(rec, params, b.wt.all(), fi, fo, l.w_off as u32);
             }
         }
+        for (k, (r0, rows)) in b.chunks(n).into_iter().enumerate() {
+            let v = b.rows(r0, rows);
+            let d = sub(d_out, r0, rows, OUT_DIMS as u64);
+            self.backward_chunk(rec, b, &v, rows, params, d, grads, accumulate || k > 0);
+        }
+        rec.set_zone("");
+    }
+
+    /// [`Mlp::backward`] of one chunk of rows (`bufs` for the per-network scratch).
+    #[allow(clippy::too_many_arguments)]
+    fn backward_chunk(
+        &self,
+        rec: &mut Recorder<'_>,
+        bufs: &MlpBuffers,
+        b: &Acts<'_>,
+        n: u32,
+        params: BufSlice<'_>,
+        d_out: BufSlice<'_>,
+        grads: BufSlice<'_>,
+        accumulate: bool,
+    ) {
+        let cfg = *self.cfg();
+        let (chunks, chunk_rows) = chunking(n);
         // dW, db of one Linear whose input is [a | bb] and output gradient dz.
         let weights = |rec: &mut Recorder<'_>,
                        l: &LinearSpec,
@@ -505,17 +607,20 @@ impl Mlp {
                 chunk_rows,
             };
             let binb = bb.map_or(a.0, |x| x.0);
-            let grid = [
-                (l.fan_in as u32 + 1).div_ceil(TILE),
-                (l.fan_out as u32).div_ceil(TILE),
-                chunks,
-            ];
-            rec.dispatch(
-                &self.bwd_weight,
-                &pc,
-                &[dz.0, a.0, binb, b.partials.all()],
-                grid,
-            );
+            let (fi, fo) = (l.fan_in as u32, l.fan_out as u32);
+            let chunks = if let Some(rp) = &self.rows {
+                rp.weight_grad(rec, n, dz, a, bb, fi, fo, bufs.partials.all());
+                1
+            } else {
+                let grid = [(fi + 1).div_ceil(TILE), fo.div_ceil(TILE), chunks];
+                rec.dispatch(
+                    &self.bwd_weight,
+                    &pc,
+                    &[dz.0, a.0, binb, bufs.partials.all()],
+                    grid,
+                );
+                chunks
+            };
             let count = (l.fan_out * (l.fan_in + 1)) as u32;
             let rp = MlpReduceParams {
                 count,
@@ -526,7 +631,12 @@ impl Mlp {
                 accumulate: accumulate as u32,
                 ..Default::default()
             };
-            rec.dispatch_threads(&self.reduce, &rp, &[b.partials.all(), grads], [count, 1, 1]);
+            rec.dispatch_threads(
+                &self.reduce,
+                &rp,
+                &[bufs.partials.all(), grads],
+                [count, 1, 1],
+            );
         };
         // d_in[:, out_col..] (+)= mask ⊙ (dz · W[:, col0..col0+cols]).
         #[allow(clippy::too_many_arguments)]
@@ -561,7 +671,7 @@ impl Mlp {
                         a: (dz.0, l.fan_out as u32, dz.1),
                         b: None,
                         fan_in: l.fan_out as u32,
-                        mat: b.wt.all(),
+                        mat: bufs.wt.all(),
                         m_off: (l.w_off + col0 as usize * l.fan_out) as u64,
                         count: cols,
                         bias: None,
@@ -587,7 +697,7 @@ impl Mlp {
         let depth = cfg.depth as usize;
         let skip_layer = cfg.skip.map(|s| s as usize + 1);
         let head = self.layout.head();
-        let last = b.h[depth - 1].all();
+        let last = b.h[depth - 1];
         weights(rec, head, (d_out, OUT_DIMS as u32), (last, w, w), None);
         data(
             rec,
@@ -595,32 +705,32 @@ impl Mlp {
             (d_out, OUT_DIMS as u32),
             0,
             w,
-            (b.dz[0].all(), w, 0),
+            (b.dz[0], w, 0),
             Some((last, w)),
             false,
         );
         let mut cur = 0;
         let mut dtf_written = false;
         for (i, l) in self.layout.trunk().iter().enumerate().rev() {
-            let dz = (b.dz[cur].all(), w);
-            let nxt = (b.dz[1 - cur].all(), w, 0);
+            let dz = (b.dz[cur], w);
+            let nxt = (b.dz[1 - cur], w, 0);
             if i == 0 {
-                weights(rec, l, dz, (b.x0.all(), ind, ind), None);
+                weights(rec, l, dz, (b.x0, ind, ind), None);
                 if tn {
-                    data(rec, l, dz, xd, tf, (b.dtf.all(), tf, 0), None, dtf_written);
+                    data(rec, l, dz, xd, tf, (b.dtf, tf, 0), None, dtf_written);
                     dtf_written = true;
                 }
             } else if skip_layer == Some(i) {
-                let prev = b.h[i - 1].all();
-                weights(rec, l, dz, (b.x0.all(), ind, ind), Some((prev, w)));
+                let prev = b.h[i - 1];
+                weights(rec, l, dz, (b.x0, ind, ind), Some((prev, w)));
                 data(rec, l, dz, ind, w, nxt, Some((prev, w)), false);
                 if tn {
-                    data(rec, l, dz, xd, tf, (b.dtf.all(), tf, 0), None, false);
+                    data(rec, l, dz, xd, tf, (b.dtf, tf, 0), None, false);
                     dtf_written = true;
                 }
                 cur = 1 - cur;
             } else {
-                let prev = b.h[i - 1].all();
+                let prev = b.h[i - 1];
                 weights(rec, l, dz, (prev, w, w), None);
                 data(rec, l, dz, 0, w, nxt, Some((prev, w)), false);
                 cur = 1 - cur;
@@ -629,9 +739,9 @@ impl Mlp {
         if tn {
             let t = self.layout.time_net();
             let (hid, ted) = (self.hidden() as u32, cfg.t_enc_dims() as u32);
-            let dtf = (b.dtf.all(), tf);
-            weights(rec, &t[1], dtf, (b.ht.all(), hid, hid), None);
-            let dh = b.dz[1 - cur].all();
+            let dtf = (b.dtf, tf);
+            weights(rec, &t[1], dtf, (b.ht, hid, hid), None);
+            let dh = b.dz[1 - cur];
             data(
                 rec,
                 &t[1],
@@ -639,11 +749,10 @@ impl Mlp {
                 0,
                 hid,
                 (dh, hid, 0),
-                Some((b.ht.all(), hid)),
+                Some((b.ht, hid)),
                 false,
             );
-            weights(rec, &t[0], (dh, hid), (b.enc_t.all(), ted, ted), None);
+            weights(rec, &t[0], (dh, hid), (b.enc_t, ted, ted), None);
         }
-        rec.set_zone("");
     }
 }

@@ -46,6 +46,24 @@ pub struct MlpTransposeParams {
     pub pad: u32,
 }
 
+/// Mirrors `MlpRowsWeightParams` in glsl/include/params.glsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct MlpRowsWeightParams {
+    pub r0: u32,
+    pub rows: u32,
+    pub fan_in: u32,
+    pub fan_out: u32,
+    pub ka: u32,
+    pub a_stride: u32,
+    pub b_stride: u32,
+    pub dz_stride: u32,
+    pub dz_res: u32,
+    pub accumulate: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+}
+
 /// Which kernels run the MLP's Linears.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 pub enum MlpKernels {
@@ -103,8 +121,12 @@ pub struct Gemv<'a> {
     pub accumulate: bool,
 }
 
+/// Outputs per invocation of the weight-gradient kernel (mirrors OB).
+const WEIGHT_OB: u32 = 32;
+
 pub struct RowsPath {
     rows: ComputePipeline,
+    weight: ComputePipeline,
     transpose: ComputePipeline,
     range: u64,
     align: u64,
@@ -114,6 +136,7 @@ impl RowsPath {
     pub fn new(gpu: &Gpu) -> Result<Self> {
         Ok(RowsPath {
             rows: gpu.pipeline(&shaders::mlp::LINEAR_ROWS)?,
+            weight: gpu.pipeline(&shaders::mlp::LINEAR_BWD_WEIGHT_ROWS)?,
             transpose: gpu.pipeline(&shaders::mlp::TRANSPOSE_W)?,
             range: (gpu.info.max_uniform_buffer_range as u64).min(UBO_BLOCK),
             align: gpu.info.min_uniform_buffer_offset_alignment.max(4),
@@ -186,6 +209,52 @@ impl RowsPath {
             let act = g.mask.map_or(g.a.0, |m| m.0);
             rec.dispatch(&self.rows, &pc, &[mw, bw, g.a.0, binb, act, g.out.0], grid);
             j += cnt;
+        }
+    }
+
+    /// `partial[o][c] = Σ_r dz[r][o] · [a | bb | 1][r][c]` over `n` rows (`fan_out` ×
+    /// (`fan_in` + 1) floats), one dispatch per uniform window of dz rows, in row order.
+    #[allow(clippy::too_many_arguments)]
+    pub fn weight_grad(
+        &self,
+        rec: &mut Recorder<'_>,
+        n: u32,
+        dz: (BufSlice<'_>, u32),
+        a: (BufSlice<'_>, u32, u32),
+        bb: Option<(BufSlice<'_>, u32)>,
+        fan_in: u32,
+        fan_out: u32,
+        partial: BufSlice<'_>,
+    ) {
+        let per = ((self.range - self.align) / 4 / dz.1 as u64).max(1) as u32;
+        let grid = [(fan_in + 1).div_ceil(64), fan_out.div_ceil(WEIGHT_OB), 1];
+        let binb = bb.map_or(a.0, |x| x.0);
+        let mut r0 = 0;
+        while r0 < n.max(1) {
+            let rows = per.min(n - r0);
+            // n = 0 still runs one (empty) window, which zeroes the partial.
+            let floats = if rows == 0 {
+                1
+            } else {
+                ((rows - 1) * dz.1 + fan_out) as u64
+            };
+            let (w, dz_res) = self.window(dz.0, r0 as u64 * dz.1 as u64, floats);
+            let pc = MlpRowsWeightParams {
+                r0,
+                rows,
+                fan_in,
+                fan_out,
+                ka: a.1,
+                a_stride: a.2,
+                b_stride: bb.map_or(0, |x| x.1),
+                dz_stride: dz.1,
+                dz_res,
+                accumulate: (r0 > 0) as u32,
+                pad0: 0,
+                pad1: 0,
+            };
+            rec.dispatch(&self.weight, &pc, &[w, a.0, binb, partial], grid);
+            r0 += rows.max(1);
         }
     }
 

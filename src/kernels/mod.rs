@@ -203,6 +203,21 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         ),
         layout!(mlp_rows::MlpTransposeParams, fan_in, fan_out, w_off, pad),
         layout!(
+            mlp_rows::MlpRowsWeightParams,
+            r0,
+            rows,
+            fan_in,
+            fan_out,
+            ka,
+            a_stride,
+            b_stride,
+            dz_stride,
+            dz_res,
+            accumulate,
+            pad0,
+            pad1
+        ),
+        layout!(
             mlp_fused::MlpFusedParams,
             n,
             depth,
