@@ -17,6 +17,8 @@ use crate::testing::Noise;
 use crate::vk::{Buffer, Gpu, Recorder, Timings};
 
 pub mod raster_scenes;
+pub mod mlp_table;
+pub mod step;
 
 /// Key distributions for the sort benchmark.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -371,18 +373,35 @@ pub enum Suite {
     Sort,
     Scan,
     Raster,
+    /// The deformation MLP: tiled vs register kernels, fused forwards, % of the FMA ceiling.
+    Mlp,
+    /// The whole training step (built-in and mujoco scenes, baseline and DispFlow), old vs new
+    /// kernels, per zone.
+    Step,
 }
 
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
-    /// Kernel families to time (comma-separated).
+    /// What to time, e.g. `dispflow-vk bench step` (same as --suite).
+    #[arg(value_enum)]
+    pub what: Vec<Suite>,
+    /// Kernel families to time (comma-separated); positional names take precedence.
     #[arg(
         long,
         value_enum,
         value_delimiter = ',',
-        default_value = "sort,scan,raster"
+        default_value = "sort,scan,raster,mlp,step"
     )]
     pub suite: Vec<Suite>,
+    /// MLP and step: Gaussians per MLP case (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "10000")]
+    pub mlp_sizes: Vec<u32>,
+    /// Step: untimed steps before the timed ones (per kernel set).
+    #[arg(long, default_value_t = 2)]
+    pub warm_steps: u32,
+    /// Step: timed steps per kernel set (the table reports the median).
+    #[arg(long, default_value_t = 5)]
+    pub steps: u32,
     /// Sort/scan sizes as powers of two (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "16,18,20,22")]
     pub log2_sizes: Vec<u32>,
@@ -469,7 +488,12 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
         gpu.info, gpu.info.subgroup_size
     );
     let mut rows = Vec::new();
-    let has = |x: Suite| args.suite.contains(&x);
+    let chosen = if args.what.is_empty() {
+        &args.suite
+    } else {
+        &args.what
+    };
+    let has = |x: Suite| chosen.contains(&x);
     for &lg in &args.log2_sizes {
         let n = 1u32 << lg.min(26);
         if has(Suite::Sort) {
@@ -530,6 +554,13 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
             &args.raster_scenes,
             args.reps,
         )?);
+    }
+    if has(Suite::Mlp) {
+        rows.extend(mlp_table::mlp_rows(&gpu, &args.mlp_sizes, args.reps)?);
+    }
+    if has(Suite::Step) {
+        let st = step::run_step_bench(&gpu, args.warm_steps, args.steps)?;
+        rows.extend(step::report(&gpu, &st, args.reps)?);
     }
     println!("\n| kernel | n | median GPU ms | M elements/s | time share by stage |");
     println!("|---|---:|---:|---:|---|");

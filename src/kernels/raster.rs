@@ -288,7 +288,13 @@ impl BlendBwdVariant {
     /// subgroup kernel on the issue-14 scenes, `bench --suite raster`); the subgroup kernel on
     /// GPUs, where an 8-invocation workgroup per tile would leave most of a warp idle (not
     /// measured there yet).
+    /// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum` overrides the choice (benches, tests).
     pub fn for_device(info: &crate::vk::DeviceInfo) -> Self {
+        match std::env::var("DISPFLOW_BLEND_BWD").as_deref() {
+            Ok("subgroup-atomic") => return BlendBwdVariant::SubgroupAtomic,
+            Ok("tile-accum") => return BlendBwdVariant::TileAccum,
+            _ => {}
+        }
         if info.kind == "CPU" {
             BlendBwdVariant::TileAccum
         } else {

@@ -1,0 +1,188 @@
+//! `dispflow-vk bench step`: the end-to-end training step (built-in scene and a mujoco scene,
+//! fast preset; baseline and DispFlow), today's kernels against the kernels of an older
+//! choice in the same run, per zone, with the MLP's share of the FMA ceiling measured in the
+//! same run. Steps of the variants are interleaved so load on a shared machine hits them alike.
+
+use std::path::PathBuf;
+
+use super::{median, BenchRow};
+use crate::data::{self, synthetic::Preset as ScenePreset};
+use crate::error::Result;
+use crate::kernels::mlp_fused::FmaPeak;
+use crate::train::cli::{builtin_scene, load_options};
+use crate::train::config::{Preset, TrainConfig};
+use crate::train::Trainer;
+use crate::vk::{Gpu, Recorder, Timings};
+
+/// A kernel choice a step runs with (set through the override variables, which the passes
+/// read when they are built at the first step).
+#[derive(Clone, Copy, Debug)]
+pub struct KernelSet {
+    pub name: &'static str,
+    pub mlp: &'static str,
+    pub blend_bwd: &'static str,
+}
+
+/// The choice before issue 14 and the CPU default after it.
+pub const KERNEL_SETS: [KernelSet; 2] = [
+    KernelSet {
+        name: "tiled MLP + subgroup-atomic blend bwd (before)",
+        mlp: "tiled",
+        blend_bwd: "subgroup-atomic",
+    },
+    KernelSet {
+        name: "rows MLP + tile-accum blend bwd",
+        mlp: "rows",
+        blend_bwd: "tile-accum",
+    },
+];
+
+/// One timed configuration's result.
+pub struct StepRow {
+    pub scene: String,
+    pub method: &'static str,
+    pub kernels: &'static str,
+    pub gaussians: u32,
+    pub median_ms: f64,
+    /// (zone, median ms) over the timed steps.
+    pub zones: Vec<(String, f64)>,
+}
+
+fn zones(t: &Timings) -> Vec<(String, f64)> {
+    let mut out: Vec<(String, f64)> = Vec::new();
+    for (label, ms) in t.by_label() {
+        let zone = label.rsplit_once('/').map_or("other", |z| z.0).to_string();
+        match out.iter_mut().find(|e| e.0 == zone) {
+            Some(e) => e.1 += ms,
+            None => out.push((zone, ms)),
+        }
+    }
+    out
+}
+
+/// The scenes: the built-in one, and mujoco-scene7 when the shared data is present.
+fn scenes() -> Result<Vec<(String, PathBuf)>> {
+    let mut v = vec![("built-in".to_string(), builtin_scene(ScenePreset::Small, 0)?)];
+    let mujoco = PathBuf::from("../shared/data/mujoco-scene7_deformation");
+    if mujoco.is_dir() {
+        v.push(("mujoco-scene7".to_string(), mujoco));
+    }
+    Ok(v)
+}
+
+/// Times `steps` steps (after `warm`) of each scene × method × kernel set.
+pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> {
+    let mut rows = Vec::new();
+    for (scene, dir) in scenes()? {
+        for (method, weight) in [("baseline", 0.0f32), ("DispFlow", 0.1)] {
+            let mut cfg = TrainConfig::preset(Preset::Fast);
+            // The deformation and the motion term on from the first step, densification off,
+            // so every timed step does the same work.
+            cfg.warm_up = 0;
+            cfg.motion_start = 0;
+            cfg.motion_weight = weight;
+            cfg.densify.from = u32::MAX;
+            let data = data::load(&dir, &load_options(&cfg))?;
+            let mut trainers = Vec::new();
+            for k in KERNEL_SETS {
+                std::env::set_var("DISPFLOW_MLP_KERNELS", k.mlp);
+                std::env::set_var("DISPFLOW_BLEND_BWD", k.blend_bwd);
+                let mut tr = Trainer::new(gpu, &cfg, &data)?;
+                tr.step(false, false)?; // builds the passes with this kernel set
+                trainers.push(tr);
+            }
+            std::env::remove_var("DISPFLOW_MLP_KERNELS");
+            std::env::remove_var("DISPFLOW_BLEND_BWD");
+            let mut times: Vec<Vec<Timings>> = vec![Vec::new(); trainers.len()];
+            for _ in 0..warm {
+                for tr in &mut trainers {
+                    tr.step(false, false)?;
+                }
+            }
+            for _ in 0..steps {
+                for (tr, t) in trainers.iter_mut().zip(&mut times) {
+                    let log = tr.step(true, true)?.expect("values asked");
+                    t.push(log.timings);
+                }
+            }
+            for ((tr, t), k) in trainers.iter().zip(times).zip(KERNEL_SETS) {
+                let med = median(t.iter().map(Timings::total_ms).collect());
+                let mut zs: Vec<(String, Vec<f64>)> = Vec::new();
+                for z in t.iter().map(zones) {
+                    for (name, ms) in z {
+                        match zs.iter_mut().find(|e| e.0 == name) {
+                            Some(e) => e.1.push(ms),
+                            None => zs.push((name, vec![ms])),
+                        }
+                    }
+                }
+                rows.push(StepRow {
+                    scene: scene.clone(),
+                    method,
+                    kernels: k.name,
+                    gaussians: tr.n(),
+                    median_ms: med,
+                    zones: zs.into_iter().map(|(n, v)| (n, median(v))).collect(),
+                });
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// Prints the step table (speed-up of each kernel set against the first, same scene and
+/// method) and the per-zone table; returns rows for the JSON output.
+pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>> {
+    let peak = fma_peak(gpu, reps)?;
+    println!("\nFMA ceiling (register-only `fma_peak`, same run): {peak:.2} GFLOP/s");
+    println!("\n| scene | method | kernels | Gaussians | median ms/step | speed-up | zones (median ms, share) |");
+    println!("|---|---|---|---:|---:|---:|---|");
+    let mut out = Vec::new();
+    for r in rows {
+        let base = rows
+            .iter()
+            .find(|b| b.scene == r.scene && b.method == r.method)
+            .map_or(r.median_ms, |b| b.median_ms);
+        let z: Vec<String> = r
+            .zones
+            .iter()
+            .map(|(n, ms)| format!("{n} {ms:.1} ({:.0}%)", 100.0 * ms / r.median_ms))
+            .collect();
+        println!(
+            "| {} | {} | {} | {} | {:.1} | {:.2}× | {} |",
+            r.scene,
+            r.method,
+            r.kernels,
+            r.gaussians,
+            r.median_ms,
+            base / r.median_ms,
+            z.join(", ")
+        );
+        out.push(BenchRow {
+            kernel: format!("step {} {} [{}]", r.scene, r.method, r.kernels),
+            n: r.gaussians,
+            median_ms: r.median_ms,
+            m_per_s: r.gaussians as f64 / r.median_ms / 1e3,
+            stages: r
+                .zones
+                .iter()
+                .map(|(n, ms)| (n.clone(), 100.0 * ms / r.median_ms))
+                .collect(),
+        });
+    }
+    Ok(out)
+}
+
+/// GFLOP/s of the register-only FMA probe (median of `reps`).
+pub fn fma_peak(gpu: &Gpu, reps: usize) -> Result<f64> {
+    let fma = FmaPeak::new(gpu)?;
+    let out = gpu.buffer("fma peak out", 512 * 256 * 4)?;
+    let mut flop = 0.0;
+    let mut v = Vec::new();
+    for _ in 0..reps.max(3) {
+        let mut rec = Recorder::timed(gpu)?;
+        flop = fma.record(&mut rec, out.all(), 512, 2048);
+        v.push(rec.finish()?.total_ms());
+    }
+    Ok(flop / (median(v) * 1e6))
+}
