@@ -1,4 +1,6 @@
-//! Deformation MLP on the GPU against the CPU twin (`reference::mlp`, f64 accumulation).
+//! Deformation MLP on the GPU against the CPU twin (`reference::mlp`, f64 accumulation), on both
+//! kernel paths (tiled GEMMs and the register path), also in chunks beyond one binding. Longer
+//! than 600 lines: one case builder and one comparison serve every path and extreme.
 //!
 //! Tolerances. The GPU accumulates in f32 over dot products of up to 349 terms per layer and
 //! 8 + 2 layers; the rounding error of one dot product is ≈ √K·2⁻²⁴ of its ℓ1 mass, and the

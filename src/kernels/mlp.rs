@@ -2,9 +2,14 @@
 //! linear_bwd_data,linear_bwd_weight,reduce_grad}.comp`). CPU twin: `reference::mlp`.
 //!
 //! One dispatch per Linear, dims and offsets in push constants, so depth, width, skip and the
-//! time encoding are runtime configuration ([`MlpConfig`]). Every Linear is a 64×64-tiled GEMM
-//! with a fused bias + ReLU epilogue; the skip concatenation `[γ(x), t_feat, h]` is read from two
-//! buffers without a copy.
+//! time encoding are runtime configuration ([`MlpConfig`]). On GPUs every Linear is a 64×64-tiled
+//! GEMM with a fused bias + ReLU epilogue; on CPU devices the register path
+//! ([`super::mlp_rows`], same buffers and maths) runs them. The skip concatenation
+//! `[γ(x), t_feat, h]` is read from two buffers without a copy. Batches whose rows exceed one
+//! storage-buffer binding run in chunks of rows ([`MlpBuffers::chunk_rows`]).
+//!
+//! Longer than 600 lines because the forward, the backward and the chunking share one buffer
+//! contract (which activation each backward stage reads); split, each half would restate it.
 //!
 //! Backward stores activations (no recomputation): the forward keeps the encoded input, the
 //! time-net hidden layer and every trunk layer's post-ReLU output, which also serve as the ReLU
