@@ -4,6 +4,7 @@
 //! commands ([`run`], [`render`]). The [`Evaluator`] owns its scratch: evaluating never
 //! touches a training buffer.
 
+pub mod lpips;
 pub mod render;
 pub mod report;
 pub mod run;
