@@ -57,9 +57,11 @@ fn bad_tensor(path: &Path, tensor: &str, why: impl std::fmt::Display) -> Error {
 
 /// Reads and checks a weight file: every tensor present, shaped as the table above, finite.
 pub fn load_weights(path: &Path) -> Result<LpipsWeights> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Io {
-        path: path.display().to_string(),
-        source,
+    let bytes = std::fs::read(path).map_err(|e| {
+        Error::Invalid(format!(
+            "{}: cannot read the LPIPS weights ({e}); convert them with tools/lpips_weights.py",
+            path.display()
+        ))
     })?;
     parse_weights(path, &bytes)
 }
