@@ -236,6 +236,11 @@ pub struct LpipsBuffers {
     slots: [u32; 5],
 }
 
+/// Output pixels and channels per `conv` invocation (`CONV_PX`, `CONV_CO` in
+/// glsl/lpips/conv.comp).
+const CONV_PX: u32 = 8;
+const CONV_CO: u32 = 32;
+
 /// Workgroup width of `lpips_diff` (one partial sum per workgroup).
 const DIFF_WG: u32 = 64;
 
@@ -353,14 +358,13 @@ impl Lpips {
             (p.out_w - 1) * p.stride + p.ksize <= p.in_w + 2 * p.pad
                 && (p.out_h - 1) * p.stride + p.ksize <= p.in_h + 2 * p.pad
         );
-        // One 256-thread workgroup per 64 pixels × 64 channels (the GEMM tile).
-        let wg = self.conv.workgroup_size()[0];
-        let groups = [(p.out_w * p.out_h).div_ceil(64), p.cout.div_ceil(64), batch];
+        // One thread per CONV_PX pixels of a row × CONV_CO channels.
+        let blocks = p.out_w.div_ceil(CONV_PX) * p.out_h;
         rec.dispatch_threads(
             &self.conv,
             p,
             &[src, weights, dst],
-            [groups[0] * wg, groups[1], groups[2]],
+            [blocks, p.cout.div_ceil(CONV_CO), batch],
         );
     }
 
