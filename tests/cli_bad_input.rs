@@ -635,8 +635,7 @@ fn eval_bad_lpips_weights() {
             vec!["lin2.weight", "element 3", "NaN"],
         ),
     ];
-    let mut n = 0;
-    for (name, bytes, mut want) in files {
+    for (n, (name, bytes, mut want)) in files.into_iter().enumerate() {
         let p = dir.join(name);
         std::fs::write(&p, bytes).unwrap();
         let r = copy_run(&format!("run-lpips-{n}"));
@@ -657,7 +656,6 @@ fn eval_bad_lpips_weights() {
             snapshot(&r) == before,
             "eval with bad {name} changed the run directory"
         );
-        n += 1;
     }
     let gone = dir.join("no-such.safetensors");
     fails(

@@ -298,7 +298,7 @@ impl Lpips {
                 return Err(Error::Invalid(format!(
                     "LPIPS of {width}×{height} images: {name} needs {} MiB, over this device's \
                      storage-buffer range of {} MiB; score smaller images",
-                    floats * 4 >> 20,
+                    (floats * 4) >> 20,
                     limit >> 20
                 )));
             }
