@@ -598,6 +598,104 @@ fn eval_and_render_bad_run_directories() {
     assert_eq!(n, 1 + 2 * cases.len() + render_cases.len());
 }
 
+/// `eval --lpips-weights` with files that are not usable weights: refused before anything is
+/// evaluated, naming the file and the tensor; a valid file fills the LPIPS column.
+#[test]
+fn eval_bad_lpips_weights() {
+    use dispflow_vk::eval::lpips::{random_weights, to_safetensors};
+    let f = fixture();
+    let w = random_weights(9);
+    let dir = f.root.join("lpips-weights");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut nan = w.lin_weight(1).to_vec();
+    nan[3] = f32::NAN;
+    let files: Vec<(&str, Vec<u8>, Vec<&str>)> = vec![
+        (
+            "torch.pth",
+            b"PK\x03\x04 a pickled torch file".to_vec(),
+            vec!["not a safetensors file", "tools/lpips_weights.py"],
+        ),
+        (
+            "missing.safetensors",
+            to_safetensors(&w, Some("conv5.bias"), None),
+            vec!["conv5.bias", "missing", "[256]"],
+        ),
+        (
+            "shape.safetensors",
+            to_safetensors(
+                &w,
+                None,
+                Some(("conv1.weight", vec![64, 3, 7, 7], vec![0.0; 64 * 3 * 49])),
+            ),
+            vec!["conv1.weight", "[64, 3, 7, 7]", "expected [64, 3, 11, 11]"],
+        ),
+        (
+            "nan.safetensors",
+            to_safetensors(&w, None, Some(("lin2.weight", vec![1, 192, 1, 1], nan))),
+            vec!["lin2.weight", "element 3", "NaN"],
+        ),
+    ];
+    for (n, (name, bytes, mut want)) in files.into_iter().enumerate() {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        let r = copy_run(&format!("run-lpips-{n}"));
+        let before = snapshot(&r);
+        want.push(name);
+        fails(
+            &[
+                "eval",
+                "--no-pictures",
+                "--run",
+                r.to_str().unwrap(),
+                "--lpips-weights",
+                p.to_str().unwrap(),
+            ],
+            &want,
+        );
+        assert!(
+            snapshot(&r) == before,
+            "eval with bad {name} changed the run directory"
+        );
+    }
+    let gone = dir.join("no-such.safetensors");
+    fails(
+        &[
+            "eval",
+            "--run",
+            f.run.to_str().unwrap(),
+            "--lpips-weights",
+            gone.to_str().unwrap(),
+        ],
+        &["no-such.safetensors", "LPIPS", "tools/lpips_weights.py"],
+    );
+    // The control: valid weights evaluate and fill the column.
+    let good = dir.join("good.safetensors");
+    std::fs::write(&good, to_safetensors(&w, None, None)).unwrap();
+    let r = copy_run("run-lpips-ok");
+    let o = bin(&f.root)
+        .args([
+            "eval",
+            "--no-pictures",
+            "--run",
+            r.to_str().unwrap(),
+            "--lpips-weights",
+        ])
+        .arg(&good)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(r.join("eval/metrics.json")).unwrap())
+            .unwrap();
+    assert!(
+        m["lpips"]
+            .as_f64()
+            .is_some_and(|v| v.is_finite() && v > 0.0),
+        "{}",
+        m["lpips"]
+    );
+}
+
 /// `train --resume` from a bad checkpoint or under another configuration: refused before the
 /// run directory changes.
 #[test]

@@ -134,6 +134,30 @@ fn eval_and_render_a_tiny_run() {
     let psnr_cell: f64 = t.rows[0][col("PSNR")].parse().unwrap();
     assert!((psnr_cell - json["psnr"].as_f64().unwrap()).abs() <= 0.005 + 1e-9);
     assert_eq!(t.rows[0][col("LPIPS")], "n/a");
+    // --- eval with LPIPS weights (the reference fixture's): per-frame values and the column ---
+    let mut a = eval_args(vec![base.clone()]);
+    a.no_pictures = true;
+    a.lpips_weights =
+        Some(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/lpips/alex_random_f16.safetensors"));
+    let r = run_eval(&a).unwrap();
+    let per: Vec<f64> = r[0].per_frame.iter().map(|f| f.lpips.unwrap()).collect();
+    assert!(per.iter().all(|v| v.is_finite() && *v > 0.0), "{per:?}");
+    let mean = per.iter().sum::<f64>() / per.len() as f64;
+    assert!((r[0].lpips.unwrap() - mean).abs() < 1e-12);
+    assert!(
+        r[0].lpips_note.contains("alex_random_f16"),
+        "{}",
+        r[0].lpips_note
+    );
+    let lj: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(base.join("eval/metrics.json")).unwrap())
+            .unwrap();
+    assert!(lj["per_frame"][0]["lpips"].is_number() && lj["lpips"].is_number());
+    let lt = Table::parse_markdown(&std::fs::read_to_string(base.join("eval/table.md")).unwrap())
+        .unwrap();
+    let cell: f64 = lt.rows[0][col("LPIPS")].parse().unwrap();
+    assert!((cell - mean).abs() <= 5e-5 + 1e-9);
+
     let combined = Table::parse_markdown(&std::fs::read_to_string(&table_path).unwrap()).unwrap();
     assert_eq!(combined.rows.len(), 2);
     assert!(combined.rows[1][0].starts_with("Deformable-3DGS"));

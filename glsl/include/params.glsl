@@ -323,4 +323,52 @@ struct MetricsParams {
     uint pad;
 };
 
+// src/kernels/lpips.rs — LPIPS (AlexNet backbone): input scaling, conv + ReLU, max-pool, and the
+// per-stage normalise → squared difference → learned 1×1 weights → spatial mean.
+struct LpipsInputParams {
+    uint width;
+    uint height;
+    uint pad0;
+    uint pad1;
+    vec4 shift;       // the reference package's ScalingLayer shift (rgb, unused)
+    vec4 scale;       // and scale: x' = (x − shift) / scale on x ∈ [−1, 1]
+};
+
+struct LpipsConvParams {
+    uint in_w;
+    uint in_h;
+    uint out_w;
+    uint out_h;
+    uint cin;
+    uint cout;
+    uint ksize;       // square kernel side
+    uint stride;
+    uint pad;         // zero padding on every side
+    uint w_off;       // weight [cout][cin][k][k] offset (floats) in the weight buffer
+    uint b_off;       // bias [cout] offset
+    uint pad0;
+};
+
+struct LpipsPoolParams {
+    uint in_w;
+    uint in_h;
+    uint out_w;
+    uint out_h;
+    uint planes;      // batch · channels
+    uint pad0;
+    uint pad1;
+    uint pad2;
+};
+
+struct LpipsDiffParams {
+    uint width;
+    uint height;
+    uint channels;
+    uint lin_off;     // 1×1 linear weights [channels] offset in the weight buffer
+    float inv_count;  // 1 / (width · height): the spatial mean
+    uint sum_off;     // first partial-sum slot of this stage
+    uint pad0;
+    uint pad1;
+};
+
 #endif

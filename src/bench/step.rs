@@ -62,7 +62,10 @@ fn zones(t: &Timings) -> Vec<(String, f64)> {
 
 /// The scenes: the built-in one, and mujoco-scene7 when the shared data is present.
 fn scenes() -> Result<Vec<(String, PathBuf)>> {
-    let mut v = vec![("built-in".to_string(), builtin_scene(ScenePreset::Small, 0)?)];
+    let mut v = vec![(
+        "built-in".to_string(),
+        builtin_scene(ScenePreset::Small, 0)?,
+    )];
     let mujoco = PathBuf::from("../shared/data/mujoco-scene7_deformation");
     if mujoco.is_dir() {
         v.push(("mujoco-scene7".to_string(), mujoco));

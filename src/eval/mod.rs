@@ -4,6 +4,7 @@
 //! commands ([`run`], [`render`]). The [`Evaluator`] owns its scratch: evaluating never
 //! touches a training buffer.
 
+pub mod lpips;
 pub mod render;
 pub mod report;
 pub mod run;
@@ -27,7 +28,7 @@ use crate::train::passes::{
     row, DeformPass, OverflowWatch, PhotoLoss, RenderPass, Slot, StepSizes,
 };
 use crate::train::step::ALPHA_MAX;
-use crate::vk::{Buffer, Gpu, Recorder};
+use crate::vk::{BufSlice, Buffer, Gpu, Recorder};
 
 pub use report::Report;
 
@@ -59,6 +60,9 @@ pub struct FrameEval {
     /// quality of the signal the motion loss learns from.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub flow_ap: Option<f64>,
+    /// LPIPS (AlexNet) of the render against the ground truth, when `eval` was given weights.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips: Option<f64>,
     #[serde(skip)]
     pub images: Option<FrameImages>,
 }
@@ -186,6 +190,11 @@ impl Evaluator {
             frame: None,
         };
         self.evaluate(gpu, model, view, v, true)
+    }
+
+    /// The render at (v, D(t)) of the last evaluated view, [H·W] RGBA.
+    pub fn last_render(&self) -> BufSlice<'_> {
+        self.full.all()
     }
 
     /// The Gaussians as drawn at time `t` in the canonical layout: a standard 3DGS model of
@@ -400,6 +409,7 @@ impl Evaluator {
             ap,
             drc,
             flow_ap,
+            lpips: None,
             images,
         })
     }

@@ -78,6 +78,18 @@ impl Report {
         }
     }
 
+    /// The mean of the per-frame LPIPS values, computed with the weights in `weights`.
+    pub fn set_lpips(&mut self, weights: &std::path::Path) {
+        let v: Vec<f64> = self.per_frame.iter().filter_map(|e| e.lpips).collect();
+        self.lpips = (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+        self.lpips_note = format!(
+            "AlexNet LPIPS (lpips v0.1) of the render vs ground truth, mean over {} test frames, \
+             weights {}",
+            v.len(),
+            weights.display()
+        );
+    }
+
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).expect("report serialises")
     }

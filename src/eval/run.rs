@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::lpips::LpipsScorer;
 use super::report::{table, Report, ReportContext};
 use super::{FrameEval, FrameImages};
 use crate::data::{self, Dataset};
@@ -182,7 +183,9 @@ pub struct EvalArgs {
     /// Dataset directory [default: the one recorded in the run's metrics.json].
     #[arg(long)]
     pub data: Option<PathBuf>,
-    /// LPIPS network weights. Without it the LPIPS column reads "n/a" (never a made-up number).
+    /// LPIPS (AlexNet) weights in dispflow-vk's safetensors format (convert the reference
+    /// package's files with tools/lpips_weights.py). Fills the LPIPS column and per-frame
+    /// values; without it the column reads "n/a" (never a made-up number).
     #[arg(long)]
     pub lpips_weights: Option<PathBuf>,
     /// Where the combined table of several runs goes [default: print it only].
@@ -195,13 +198,11 @@ pub struct EvalArgs {
 
 /// Runs `eval` over every `--run`; returns the reports (each also written to `DIR/eval/`).
 pub fn run_eval(a: &EvalArgs) -> Result<Vec<Report>> {
-    if let Some(w) = &a.lpips_weights {
-        return Err(invalid(
-            w,
-            "LPIPS needs its backbone network, which this build does not implement yet; run \
-             without --lpips-weights (the LPIPS column then reads n/a)",
-        ));
-    }
+    // A bad weight file fails before any run is opened or evaluated.
+    let lpips_weights = match &a.lpips_weights {
+        Some(p) => Some((p.clone(), super::lpips::load_weights(p)?)),
+        None => None,
+    };
     // Every run is checked before the first (slow) evaluation starts.
     let runs = a
         .run
@@ -210,9 +211,17 @@ pub fn run_eval(a: &EvalArgs) -> Result<Vec<Report>> {
         .collect::<Result<Vec<_>>>()?;
     let gpu = Gpu::new_default()?;
     eprintln!("device: {}", gpu.info);
+    let mut lpips = match lpips_weights {
+        Some((path, w)) => {
+            let mut s = LpipsScorer::new(&gpu, w)?;
+            s.source = path;
+            Some(s)
+        }
+        None => None,
+    };
     let mut reports = Vec::new();
     for run in &runs {
-        let r = eval_one(&gpu, run, !a.no_pictures)?;
+        let r = eval_one(&gpu, run, !a.no_pictures, lpips.as_mut())?;
         reports.push(r);
     }
     let t = table(&reports).to_markdown();
@@ -224,7 +233,12 @@ pub fn run_eval(a: &EvalArgs) -> Result<Vec<Report>> {
     Ok(reports)
 }
 
-fn eval_one(gpu: &Gpu, run: &Run, pictures: bool) -> Result<Report> {
+fn eval_one(
+    gpu: &Gpu,
+    run: &Run,
+    pictures: bool,
+    mut lpips: Option<&mut LpipsScorer>,
+) -> Result<Report> {
     let (ds, mut tr) = load_trainer(gpu, run)?;
     if tr.val.is_empty() {
         return Err(invalid(&run.data_dir, "the dataset has no test frames"));
@@ -235,6 +249,11 @@ fn eval_one(gpu: &Gpu, run: &Run, pictures: bool) -> Result<Report> {
     let mut per = Vec::with_capacity(tr.val.len());
     for i in 0..tr.val.len() {
         let mut e = tr.evaluate_one(i, pictures)?;
+        if let Some(s) = lpips.as_deref_mut() {
+            e.lpips = Some(tr.lpips_one(i, s).map_err(|err| {
+                invalid(&s.source, format!("LPIPS of test frame {:?}: {err}", e.id))
+            })?);
+        }
         if let Some(im) = e.images.take() {
             let path = out.join("frames").join(frame_png(i, &e.id));
             report::save_png(&frame_strip(&im)?, &path)?;
@@ -255,7 +274,10 @@ fn eval_one(gpu: &Gpu, run: &Run, pictures: bool) -> Result<Report> {
         iterations: run.iterations,
         num_gaussians: tr.n(),
     };
-    let r = Report::new(&run.cfg, ctx, per);
+    let mut r = Report::new(&run.cfg, ctx, per);
+    if let Some(s) = &lpips {
+        r.set_lpips(&s.source);
+    }
     // With --no-pictures no PNG has created the directory yet.
     std::fs::create_dir_all(&out).map_err(|source| Error::Io {
         path: out.display().to_string(),

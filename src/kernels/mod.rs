@@ -7,6 +7,7 @@ pub mod densify;
 pub mod dispflow;
 pub mod flow;
 pub mod loss;
+pub mod lpips;
 pub mod metrics;
 pub mod mlp;
 pub mod mlp_fused;
@@ -266,6 +267,52 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             detach
         ),
         layout!(metrics::MetricsParams, n, groups_x, groups, pad),
+        layout!(
+            lpips::LpipsInputParams,
+            width,
+            height,
+            pad0,
+            pad1,
+            shift,
+            scale
+        ),
+        layout!(
+            lpips::LpipsConvParams,
+            in_w,
+            in_h,
+            out_w,
+            out_h,
+            cin,
+            cout,
+            ksize,
+            stride,
+            pad,
+            w_off,
+            b_off,
+            pad0
+        ),
+        layout!(
+            lpips::LpipsPoolParams,
+            in_w,
+            in_h,
+            out_w,
+            out_h,
+            planes,
+            pad0,
+            pad1,
+            pad2
+        ),
+        layout!(
+            lpips::LpipsDiffParams,
+            width,
+            height,
+            channels,
+            lin_off,
+            inv_count,
+            sum_off,
+            pad0,
+            pad1
+        ),
     ]
 }
 

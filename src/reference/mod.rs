@@ -7,6 +7,7 @@ pub mod densify;
 pub mod dispflow;
 pub mod flow;
 pub mod loss;
+pub mod lpips;
 pub mod metrics;
 pub mod mlp;
 pub mod motion;

@@ -15,6 +15,7 @@ use std::rc::Rc;
 
 use crate::data::Dataset;
 use crate::error::{Error, Result};
+use crate::eval::lpips::LpipsScorer;
 use crate::eval::{Evaluator, FrameEval, ModelView};
 use crate::kernels::flow::FlowConfig;
 use crate::kernels::loss::LossValues;
@@ -259,6 +260,16 @@ impl<'g> Trainer<'g> {
         self.evaluator()?;
         let e = self.eval.as_mut().expect("built");
         e.frame(gpu, &self.model, view, &self.val[i], want_images)
+    }
+
+    /// LPIPS of the last [`Self::evaluate_one`]'s render against test frame `i`'s image.
+    pub fn lpips_one(&mut self, i: usize, scorer: &mut LpipsScorer) -> Result<f64> {
+        let gpu = self.gpu;
+        self.evaluator()?;
+        let e = self.eval.as_ref().expect("built");
+        let f = &self.val[i];
+        let size = (f.camera.width, f.camera.height);
+        scorer.score(gpu, size, e.last_render(), f.target.all())
     }
 
     /// Renders any view `(camera, t)` with the displacement flow since `prev` (pictures only).
