@@ -36,7 +36,10 @@ pub fn mlp_rows(gpu: &Gpu, sizes: &[u32], reps: usize) -> Result<Vec<BenchRow>> 
         for &n in sizes {
             for k in [MlpKernels::Tiled, MlpKernels::Rows] {
                 let r = mlp_row(gpu, &cfg, name, n, MlpImpl::Layerwise(k), reps.min(3))?;
-                let (tms, tg) = (r.train_ms.unwrap_or(f64::NAN), r.train_gflops.unwrap_or(0.0));
+                let (tms, tg) = (
+                    r.train_ms.unwrap_or(f64::NAN),
+                    r.train_gflops.unwrap_or(0.0),
+                );
                 println!(
                     "| {name} | {} | {n} | {:.1} | {:.2} | {:.0}% | {tms:.1} | {tg:.2} | {:.0}% | {:.1e} |",
                     k.name(),
