@@ -8,8 +8,8 @@
 use crate::error::{Error, Result};
 use crate::kernels::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use crate::kernels::raster::{
-    split_sh, BlendBwdVariant, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer,
-    RenderOpts, SplatInputs,
+    split_sh, BlendBwdVariant, BlendFwdVariant, Camera, OutputGrads, RasterBuffers, RasterSize,
+    Rasterizer, RenderOpts, SplatInputs,
 };
 use crate::kernels::scan::{Count, PrefixSum, ScanScratch};
 use crate::reference;
@@ -336,6 +336,21 @@ impl RasterCase {
     pub fn set_blend_bwd_variant(&mut self, v: BlendBwdVariant) {
         self.rast.set_blend_bwd_variant(v);
     }
+
+    /// The blend-forward variant the next `run` records.
+    pub fn set_blend_fwd_variant(&mut self, v: BlendFwdVariant) {
+        self.rast.set_blend_fwd_variant(v);
+    }
+
+    /// The last forward's outputs: rgba [px,4], depth [px] and final T [px] in one float
+    /// vector, and n_contrib [px].
+    pub fn forward_outputs(&self, gpu: &Gpu) -> Result<(Vec<f32>, Vec<u32>)> {
+        let px = (self.cam.width * self.cam.height) as u64;
+        let mut f = gpu.read(self.bufs.out_rgba.elems::<f32>(0, 4 * px))?;
+        f.extend(gpu.read::<f32>(self.bufs.out_depth.elems::<f32>(0, px))?);
+        f.extend(gpu.read::<f32>(self.bufs.final_t.elems::<f32>(0, px))?);
+        Ok((f, gpu.read(self.bufs.n_contrib.elems::<u32>(0, px))?))
+    }
 }
 
 fn splat_inputs(inputs: &[Buffer; 6], n: u32) -> SplatInputs<'_> {
@@ -424,7 +439,8 @@ pub struct BenchArgs {
     /// Rasteriser: square image sizes in pixels (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "128,256")]
     pub resolutions: Vec<u32>,
-    /// Rasteriser: issue-14 scenes timed for blend backward, every variant (comma-separated).
+    /// Rasteriser: issue-14 scenes timed for blend forward and backward, every variant
+    /// (comma-separated).
     #[arg(
         long,
         value_enum,
@@ -554,7 +570,7 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
         }
     }
     if has(Suite::Raster) {
-        rows.extend(raster_scenes::blend_bwd_rows(
+        rows.extend(raster_scenes::blend_rows(
             &gpu,
             &args.raster_scenes,
             args.reps,

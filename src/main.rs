@@ -24,10 +24,12 @@ fn main() -> anyhow::Result<()> {
             }
             let gpu = Gpu::new_default().context("opening the selected device")?;
             println!("\nselected: {:#?}", gpu.info);
-            // The per-device kernel choices (override: DISPFLOW_MLP_KERNELS, DISPFLOW_BLEND_BWD).
+            // The per-device kernel choices (override: DISPFLOW_MLP_KERNELS, DISPFLOW_BLEND_FWD,
+            // DISPFLOW_BLEND_BWD).
             println!(
-                "kernels: MLP {}, blend backward {}",
+                "kernels: MLP {}, blend forward {}, blend backward {}",
                 dispflow_vk::kernels::mlp_rows::MlpKernels::for_device(&gpu).name(),
+                dispflow_vk::kernels::raster::BlendFwdVariant::for_device(&gpu.info).name(),
                 dispflow_vk::kernels::raster::BlendBwdVariant::for_device(&gpu.info).name()
             );
         }

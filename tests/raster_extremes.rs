@@ -17,8 +17,9 @@ fn all_finite(what: &str, v: &[f32]) {
     }
 }
 
-/// Renders, backpropagates random upstream gradients with every blend-backward variant, and
-/// checks everything is finite; returns the default variant's gradients.
+/// Renders with every blend-forward variant, backpropagates random upstream gradients with
+/// every blend-backward variant after each, and checks everything is finite; returns the
+/// default variants' outputs and gradients.
 fn run_finite(scene: &Scene, w: u32, h: u32) -> (Rendered, Grads) {
     let gpu = testing::gpu();
     let mut rast = Rasterizer::new(&gpu).unwrap();
@@ -28,31 +29,33 @@ fn run_finite(scene: &Scene, w: u32, h: u32) -> (Rendered, Grads) {
         background: [0.2, 0.3, 0.4],
         alpha_max: 0.99,
     };
-    let (b, out) = render(&gpu, &rast, &cam, &up, &opts);
     let px = (w * h) as usize;
     let u = upstream(9, px, scene.feature_dims as usize);
-    all_finite("rgba", out.rgba.as_flattened());
-    all_finite("depth", &out.depth);
-    all_finite("features", &out.features);
-    let default = rast.blend_bwd_variant();
+    let (fwd_default, bwd_default) = (rast.blend_fwd_variant(), rast.blend_bwd_variant());
     let mut kept = None;
-    for (v, g) in backward_each(&gpu, &mut rast, &b, &cam, &up, &opts, &u) {
-        for (n, x) in [
-            ("grad2d", &g.grad2d),
-            ("d_means", &g.d_means),
-            ("d_scales", &g.d_scales),
-            ("d_quats", &g.d_quats),
-            ("d_logits", &g.d_logits),
-            ("d_sh", &g.d_sh),
-            ("d_features", &g.d_features),
-        ] {
-            all_finite(&format!("{} {n}", v.name()), x);
-        }
-        if v == default {
-            kept = Some(g);
+    for (fv, b, out) in render_each(&gpu, &mut rast, &cam, &up, &opts) {
+        let f = fv.name();
+        all_finite(&format!("{f} rgba"), out.rgba.as_flattened());
+        all_finite(&format!("{f} depth"), &out.depth);
+        all_finite(&format!("{f} features"), &out.features);
+        for (v, g) in backward_each(&gpu, &mut rast, &b, &cam, &up, &opts, &u) {
+            for (n, x) in [
+                ("grad2d", &g.grad2d),
+                ("d_means", &g.d_means),
+                ("d_scales", &g.d_scales),
+                ("d_quats", &g.d_quats),
+                ("d_logits", &g.d_logits),
+                ("d_sh", &g.d_sh),
+                ("d_features", &g.d_features),
+            ] {
+                all_finite(&format!("{f} {} {n}", v.name()), x);
+            }
+            if fv == fwd_default && v == bwd_default {
+                kept = Some((out.clone(), g));
+            }
         }
     }
-    (out, kept.unwrap())
+    kept.unwrap()
 }
 
 /// (mean, scale, quaternion, opacity logit) of one Gaussian.
@@ -314,7 +317,6 @@ fn twin_check(label: &str, scene: &Scene, cam: &Camera, opts: &RenderOpts, tol: 
     let gpu = testing::gpu();
     let mut rast = Rasterizer::new(&gpu).unwrap();
     let up = Uploaded::new(&gpu, scene);
-    let (b, out) = render(&gpu, &rast, cam, &up, opts);
     let n = scene.len();
     let k = scene.feature_dims;
     let g = twin::Gaussians {
@@ -327,32 +329,6 @@ fn twin_check(label: &str, scene: &Scene, cam: &Camera, opts: &RenderOpts, tol: 
         sh_degree: scene.sh_degree,
     };
     let proj = twin::project(cam, &g);
-    let splats: Vec<[f32; 4]> = gpu
-        .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
-        .unwrap();
-    let mut m = Measured::default();
-    for i in 0..n {
-        let (a, c, col) = (splats[3 * i], splats[3 * i + 1], splats[3 * i + 2]);
-        let vis = proj.radius[i] > 0;
-        assert_eq!(c[3] > 0.0, vis, "{label}: visibility of Gaussian {i}");
-        if !vis {
-            continue;
-        }
-        for (g, w) in a[..2].iter().zip(proj.mean2d[i]) {
-            let w = w as f64;
-            m.proj = m.proj.max((*g as f64 - w).abs() / w.abs().max(1.0));
-        }
-        let w = proj.depth[i] as f64;
-        m.proj = m.proj.max((a[2] as f64 - w).abs() / w.abs());
-        m.proj = m.proj.max((a[3] - proj.opacity[i]).abs() as f64);
-        let wc = proj.conic[i].map(f64::from);
-        let e = (0..3).fold(0.0f64, |e, d| e.max((c[d] as f64 - wc[d]).abs()));
-        m.proj = m.proj.max(e / max_abs(&wc));
-        for (g, w) in col[..3].iter().zip(proj.color[i]) {
-            m.proj = m.proj.max((g - w).abs() as f64);
-        }
-    }
-
     let bp = twin::BlendParams {
         width: cam.width,
         height: cam.height,
@@ -362,33 +338,61 @@ fn twin_check(label: &str, scene: &Scene, cam: &Camera, opts: &RenderOpts, tol: 
     };
     let fwd = twin::blend_fwd(&bp, &proj, &scene.features);
     let px = (cam.width * cam.height) as usize;
-    let mut contrib = 0;
-    for p in 0..px {
-        for c in 0..3 {
-            m.image = m.image.max((out.rgba[p][c] - fwd.rgb[p][c]).abs() as f64);
-        }
-        m.image = m.image.max((out.rgba[p][3] - fwd.alpha[p]).abs() as f64);
-        m.image = m.image.max((out.final_t[p] - fwd.final_t[p]).abs() as f64);
-        let w = fwd.depth[p] as f64;
-        m.image = m
-            .image
-            .max((out.depth[p] as f64 - w).abs() / (1.0 + w.abs()));
-        contrib += (out.n_contrib[p] != fwd.n_contrib[p]) as usize;
-    }
-    for (a, b) in out.features.iter().zip(&fwd.features) {
-        m.image = m.image.max((a - b).abs() as f64);
-    }
-    assert_eq!(
-        contrib, 0,
-        "{label}: pixels disagree on the last contributor"
-    );
-
     let u = upstream(17, px, k as usize);
     let bg = twin_blend_bwd(&bp, &proj, &scene.features, &fwd, &u);
     let pg = twin::project_bwd(cam, &g, &proj, &bg);
-    for (v, grads) in backward_each(&gpu, &mut rast, &b, cam, &up, opts, &u) {
-        let label = format!("{label}, blend_bwd {}", v.name());
-        grad_check(&label, scene, &grads, &bg, &pg, tol, &mut m);
+    let mut m = Measured::default();
+    // Every forward variant, and every backward variant after each.
+    for (fv, b, out) in render_each(&gpu, &mut rast, cam, &up, opts) {
+        let label = format!("{label}, blend_fwd {}", fv.name());
+        let splats: Vec<[f32; 4]> = gpu
+            .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
+            .unwrap();
+        for i in 0..n {
+            let (a, c, col) = (splats[3 * i], splats[3 * i + 1], splats[3 * i + 2]);
+            let vis = proj.radius[i] > 0;
+            assert_eq!(c[3] > 0.0, vis, "{label}: visibility of Gaussian {i}");
+            if !vis {
+                continue;
+            }
+            for (g, w) in a[..2].iter().zip(proj.mean2d[i]) {
+                let w = w as f64;
+                m.proj = m.proj.max((*g as f64 - w).abs() / w.abs().max(1.0));
+            }
+            let w = proj.depth[i] as f64;
+            m.proj = m.proj.max((a[2] as f64 - w).abs() / w.abs());
+            m.proj = m.proj.max((a[3] - proj.opacity[i]).abs() as f64);
+            let wc = proj.conic[i].map(f64::from);
+            let e = (0..3).fold(0.0f64, |e, d| e.max((c[d] as f64 - wc[d]).abs()));
+            m.proj = m.proj.max(e / max_abs(&wc));
+            for (g, w) in col[..3].iter().zip(proj.color[i]) {
+                m.proj = m.proj.max((g - w).abs() as f64);
+            }
+        }
+        let mut contrib = 0;
+        for p in 0..px {
+            for c in 0..3 {
+                m.image = m.image.max((out.rgba[p][c] - fwd.rgb[p][c]).abs() as f64);
+            }
+            m.image = m.image.max((out.rgba[p][3] - fwd.alpha[p]).abs() as f64);
+            m.image = m.image.max((out.final_t[p] - fwd.final_t[p]).abs() as f64);
+            let w = fwd.depth[p] as f64;
+            m.image = m
+                .image
+                .max((out.depth[p] as f64 - w).abs() / (1.0 + w.abs()));
+            contrib += (out.n_contrib[p] != fwd.n_contrib[p]) as usize;
+        }
+        for (a, b) in out.features.iter().zip(&fwd.features) {
+            m.image = m.image.max((a - b).abs() as f64);
+        }
+        assert_eq!(
+            contrib, 0,
+            "{label}: pixels disagree on the last contributor"
+        );
+        for (v, grads) in backward_each(&gpu, &mut rast, &b, cam, &up, opts, &u) {
+            let label = format!("{label}, blend_bwd {}", v.name());
+            grad_check(&label, scene, &grads, &bg, &pg, tol, &mut m);
+        }
     }
     eprintln!(
         "{label}: proj {:.1e}, image {:.1e}, grad_all {:.1e}, grad_each {:.1e} (every variant)",

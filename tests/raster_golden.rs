@@ -43,19 +43,20 @@ fn golden_scene() -> Scene {
 #[test]
 fn small_scene_matches_golden_png() {
     let gpu = testing::gpu();
-    let rast = Rasterizer::new(&gpu).unwrap();
+    let mut rast = Rasterizer::new(&gpu).unwrap();
     let cam = camera(64, 48);
     let up = Uploaded::new(&gpu, &golden_scene());
-    let (_, out) = render(
-        &gpu,
-        &rast,
-        &cam,
-        &up,
-        &RenderOpts {
-            background: [0.05, 0.05, 0.08],
-            alpha_max: 0.99,
-        },
-    );
+    let opts = RenderOpts {
+        background: [0.05, 0.05, 0.08],
+        alpha_max: 0.99,
+    };
+    // Every blend-forward variant against the one golden image.
+    for (fv, _, out) in render_each(&gpu, &mut rast, &cam, &up, &opts) {
+        check_golden(fv.name(), &out);
+    }
+}
+
+fn check_golden(variant: &str, out: &Rendered) {
     let img = image::RgbImage::from_fn(64, 48, |x, y| {
         let p = out.rgba[(y * 64 + x) as usize];
         image::Rgb([0, 1, 2].map(|c| (p[c].clamp(0.0, 1.0) * 255.0).round() as u8))
@@ -77,13 +78,19 @@ fn small_scene_matches_golden_png() {
         .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
         .max()
         .unwrap();
-    assert!(worst <= 1, "golden image differs by up to {worst} levels");
+    assert!(
+        worst <= 1,
+        "blend_fwd {variant}: golden image differs by up to {worst} levels"
+    );
     // The picture is not trivially empty: several distinct colours are present.
     let lit = img
         .pixels()
         .filter(|p| p[0] > 60 || p[1] > 60 || p[2] > 60)
         .count();
-    assert!(lit > 64 * 48 / 5, "only {lit} lit pixels");
+    assert!(
+        lit > 64 * 48 / 5,
+        "blend_fwd {variant}: only {lit} lit pixels"
+    );
 }
 
 dispflow_vk::subgroup_reruns!();

@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use dispflow_vk::kernels::raster::{
-    join_sh, split_sh, BlendBwdVariant, Camera, OutputGrads, RasterSize, Rasterizer, RenderOpts,
-    SplatInputs, G2D_STRIDE,
+    join_sh, split_sh, BlendBwdVariant, BlendFwdVariant, Camera, OutputGrads, RasterSize,
+    Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
 };
 use dispflow_vk::testing;
 use dispflow_vk::vk::Recorder;
@@ -120,106 +120,111 @@ fn run(name: &str) {
         feature_dims: 0,
         isect_capacity: 1,
     };
-    let mut b = rast.buffers(&gpu, &size).unwrap();
-    for buf in [&b.out_rgba, &b.splats, &b.grad2d, &b.d_means] {
-        testing::fill_noise(&gpu, buf, 7);
-    }
-    rast.render_checked(&gpu, &mut b, &cam, &g, &opts).unwrap();
-    assert!(b.isect_capacity() >= b.intersections(&gpu).unwrap());
+    // Every blend-forward variant, each followed by every blend-backward variant.
+    for fv in BlendFwdVariant::ALL {
+        rast.set_blend_fwd_variant(fv);
+        let fw = |x: &str| format!("blend_fwd {}: {x}", fv.name());
+        let mut b = rast.buffers(&gpu, &size).unwrap();
+        for buf in [&b.out_rgba, &b.splats, &b.grad2d, &b.d_means] {
+            testing::fill_noise(&gpu, buf, 7);
+        }
+        rast.render_checked(&gpu, &mut b, &cam, &g, &opts).unwrap();
+        assert!(b.isect_capacity() >= b.intersections(&gpu).unwrap());
 
-    let splats: Vec<f32> = gpu
-        .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
-        .unwrap();
-    let xys: Vec<f32> = (0..n as usize)
-        .flat_map(|i| [splats[12 * i], splats[12 * i + 1]])
-        .collect();
-    let depths: Vec<f32> = (0..n as usize).map(|i| splats[12 * i + 2]).collect();
-    let conics: Vec<f32> = (0..n as usize)
-        .flat_map(|i| [splats[12 * i + 4], splats[12 * i + 5], splats[12 * i + 6]])
-        .collect();
-    assert_close("xys", &xys, c.get("xys"), 1e-4, 1e-5);
-    assert_close("depths", &depths, c.get("depths"), 1e-5, 1e-6);
-    assert_close("conics", &conics, c.get("conics"), 1e-6, 1e-4);
-    let img: Vec<f32> = gpu.read(b.out_rgba.all()).unwrap();
-    assert_close("out_img", &img, c.get("out_img"), 2e-5, 1e-4);
+        let splats: Vec<f32> = gpu
+            .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
+            .unwrap();
+        let xys: Vec<f32> = (0..n as usize)
+            .flat_map(|i| [splats[12 * i], splats[12 * i + 1]])
+            .collect();
+        let depths: Vec<f32> = (0..n as usize).map(|i| splats[12 * i + 2]).collect();
+        let conics: Vec<f32> = (0..n as usize)
+            .flat_map(|i| [splats[12 * i + 4], splats[12 * i + 5], splats[12 * i + 6]])
+            .collect();
+        assert_close(&fw("xys"), &xys, c.get("xys"), 1e-4, 1e-5);
+        assert_close(&fw("depths"), &depths, c.get("depths"), 1e-5, 1e-6);
+        assert_close(&fw("conics"), &conics, c.get("conics"), 1e-6, 1e-4);
+        let img: Vec<f32> = gpu.read(b.out_rgba.all()).unwrap();
+        assert_close(&fw("out_img"), &img, c.get("out_img"), 2e-5, 1e-4);
 
-    let d_rgba = gpu.buffer_from("v_out_img", c.get("v_out_img")).unwrap();
-    let d_depth = gpu
-        .buffer_from(
-            "zero depth grad",
-            &vec![0f32; (cam.width * cam.height) as usize],
-        )
-        .unwrap();
-    // Every blend-backward variant against the oracle.
-    for v in BlendBwdVariant::ALL {
-        rast.set_blend_bwd_variant(v);
-        let what = |x: &str| format!("blend_bwd {}: {x}", v.name());
-        testing::fill_noise(&gpu, &b.grad2d, 8);
-        let mut rec = Recorder::new(&gpu).unwrap();
-        rast.backward(
-            &mut rec,
-            &b,
-            &cam,
-            &g,
-            &opts,
-            &OutputGrads {
-                rgba: d_rgba.all(),
-                depth: Some(d_depth.all()),
-                features: None,
-            },
-        );
-        rec.finish().unwrap();
-        let g2: Vec<f32> = gpu.read(b.grad2d.all()).unwrap();
-        let s = G2D_STRIDE as usize;
-        let v_xy: Vec<f32> = (0..n as usize)
-            .flat_map(|i| [g2[s * i], g2[s * i + 1]])
-            .collect();
-        let v_con: Vec<f32> = (0..n as usize)
-            .flat_map(|i| [g2[s * i + 2], g2[s * i + 3], g2[s * i + 4]])
-            .collect();
-        // Stored gradients carry ~4 significant digits (README): rel 2e-3, abs 1e-7.
-        let (abs, rel) = (1e-7, 2e-3);
-        assert_close(&what("v_xy"), &v_xy, c.get("v_xy"), abs, rel);
-        assert_close(&what("v_conics"), &v_con, c.get("v_conics"), abs, rel);
-        let rd = |buf: &dispflow_vk::vk::Buffer, len: usize| -> Vec<f32> {
-            gpu.read::<f32>(buf.all()).unwrap()[..len].to_vec()
-        };
-        let nn = n as usize;
-        assert_close(
-            &what("v_means"),
-            &rd(&b.d_means, 3 * nn),
-            c.get("v_means"),
-            abs,
-            rel,
-        );
-        // gsplat differentiates log-scales: ∂L/∂log s = s · ∂L/∂s.
-        let v_log: Vec<f32> = rd(&b.d_scales, 3 * nn)
-            .iter()
-            .zip(&scales)
-            .map(|(g, s)| g * s)
-            .collect();
-        assert_close(&what("v_scales"), &v_log, c.get("v_scales"), abs, rel);
-        assert_close(
-            &what("v_quats"),
-            &rd(&b.d_quats, 4 * nn),
-            c.get("v_quats"),
-            abs,
-            rel,
-        );
-        assert_close(
-            &what("v_opacities"),
-            &rd(&b.d_opacity_logits, nn),
-            c.get("v_opacities"),
-            abs,
-            rel,
-        );
-        assert_close(
-            &what("v_coeffs"),
-            &join_sh(&rd(&b.d_sh_dc, 3 * nn), &rd(&b.d_sh_rest, 45 * nn), 16),
-            c.get("v_coeffs"),
-            abs,
-            rel,
-        );
+        let d_rgba = gpu.buffer_from("v_out_img", c.get("v_out_img")).unwrap();
+        let d_depth = gpu
+            .buffer_from(
+                "zero depth grad",
+                &vec![0f32; (cam.width * cam.height) as usize],
+            )
+            .unwrap();
+        // Every blend-backward variant against the oracle.
+        for v in BlendBwdVariant::ALL {
+            rast.set_blend_bwd_variant(v);
+            let what = |x: &str| format!("blend_fwd {}, blend_bwd {}: {x}", fv.name(), v.name());
+            testing::fill_noise(&gpu, &b.grad2d, 8);
+            let mut rec = Recorder::new(&gpu).unwrap();
+            rast.backward(
+                &mut rec,
+                &b,
+                &cam,
+                &g,
+                &opts,
+                &OutputGrads {
+                    rgba: d_rgba.all(),
+                    depth: Some(d_depth.all()),
+                    features: None,
+                },
+            );
+            rec.finish().unwrap();
+            let g2: Vec<f32> = gpu.read(b.grad2d.all()).unwrap();
+            let s = G2D_STRIDE as usize;
+            let v_xy: Vec<f32> = (0..n as usize)
+                .flat_map(|i| [g2[s * i], g2[s * i + 1]])
+                .collect();
+            let v_con: Vec<f32> = (0..n as usize)
+                .flat_map(|i| [g2[s * i + 2], g2[s * i + 3], g2[s * i + 4]])
+                .collect();
+            // Stored gradients carry ~4 significant digits (README): rel 2e-3, abs 1e-7.
+            let (abs, rel) = (1e-7, 2e-3);
+            assert_close(&what("v_xy"), &v_xy, c.get("v_xy"), abs, rel);
+            assert_close(&what("v_conics"), &v_con, c.get("v_conics"), abs, rel);
+            let rd = |buf: &dispflow_vk::vk::Buffer, len: usize| -> Vec<f32> {
+                gpu.read::<f32>(buf.all()).unwrap()[..len].to_vec()
+            };
+            let nn = n as usize;
+            assert_close(
+                &what("v_means"),
+                &rd(&b.d_means, 3 * nn),
+                c.get("v_means"),
+                abs,
+                rel,
+            );
+            // gsplat differentiates log-scales: ∂L/∂log s = s · ∂L/∂s.
+            let v_log: Vec<f32> = rd(&b.d_scales, 3 * nn)
+                .iter()
+                .zip(&scales)
+                .map(|(g, s)| g * s)
+                .collect();
+            assert_close(&what("v_scales"), &v_log, c.get("v_scales"), abs, rel);
+            assert_close(
+                &what("v_quats"),
+                &rd(&b.d_quats, 4 * nn),
+                c.get("v_quats"),
+                abs,
+                rel,
+            );
+            assert_close(
+                &what("v_opacities"),
+                &rd(&b.d_opacity_logits, nn),
+                c.get("v_opacities"),
+                abs,
+                rel,
+            );
+            assert_close(
+                &what("v_coeffs"),
+                &join_sh(&rd(&b.d_sh_dc, 3 * nn), &rd(&b.d_sh_rest, 45 * nn), 16),
+                c.get("v_coeffs"),
+                abs,
+                rel,
+            );
+        }
     }
 }
 

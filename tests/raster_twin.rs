@@ -49,124 +49,130 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
         alpha_max: 0.99,
     };
     let up = Uploaded::new(&gpu, &scene);
-    let (b, out) = render(&gpu, &rast, &cam, &up, &opts);
-    let ctx = format!("seed {seed}, n {n}, {w}x{h}, sh {sh_degree}, k {k}");
+    // Every forward variant, and every backward variant after each (the backward reads the
+    // forward's final T and last contributors).
+    for (fv, b, out) in render_each(&gpu, &mut rast, &cam, &up, &opts) {
+        let ctx = format!(
+            "seed {seed}, n {n}, {w}x{h}, sh {sh_degree}, k {k}, blend_fwd {}",
+            fv.name()
+        );
 
-    let g = twin::Gaussians {
-        means: &scene.means,
-        scales: &scene.scales,
-        quats: &scene.quats,
-        opacity_logits: &scene.logits,
-        sh: &scene.sh,
-        sh_coeffs: scene.sh_coeffs,
-        sh_degree,
-    };
-    let tcam = cam;
-    let proj = twin::project(&tcam, &g);
-    let splats: Vec<[f32; 4]> = gpu
-        .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
-        .unwrap();
-    let mut visible = 0;
-    for i in 0..n {
-        let (a, c, col) = (splats[3 * i], splats[3 * i + 1], splats[3 * i + 2]);
-        let twin_vis = proj.radius[i] > 0;
-        assert_eq!(c[3] > 0.0, twin_vis, "{ctx}: gaussian {i} visibility");
-        if !twin_vis {
-            continue;
+        let g = twin::Gaussians {
+            means: &scene.means,
+            scales: &scene.scales,
+            quats: &scene.quats,
+            opacity_logits: &scene.logits,
+            sh: &scene.sh,
+            sh_coeffs: scene.sh_coeffs,
+            sh_degree,
+        };
+        let tcam = cam;
+        let proj = twin::project(&tcam, &g);
+        let splats: Vec<[f32; 4]> = gpu
+            .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
+            .unwrap();
+        let mut visible = 0;
+        for i in 0..n {
+            let (a, c, col) = (splats[3 * i], splats[3 * i + 1], splats[3 * i + 2]);
+            let twin_vis = proj.radius[i] > 0;
+            assert_eq!(c[3] > 0.0, twin_vis, "{ctx}: gaussian {i} visibility");
+            if !twin_vis {
+                continue;
+            }
+            visible += 1;
+            close_abs(
+                &format!("{ctx}: mean2d {i}"),
+                &a[..2],
+                &proj.mean2d[i],
+                1e-3,
+                1e-6,
+            );
+            close_abs(
+                &format!("{ctx}: depth {i}"),
+                &a[2..3],
+                &[proj.depth[i]],
+                0.0,
+                1e-6,
+            );
+            close_abs(
+                &format!("{ctx}: opacity {i}"),
+                &a[3..4],
+                &[proj.opacity[i]],
+                1e-7,
+                1e-6,
+            );
+            close_abs(
+                &format!("{ctx}: conic {i}"),
+                &c[..3],
+                &proj.conic[i],
+                1e-7,
+                1e-4,
+            );
+            close_abs(
+                &format!("{ctx}: colour {i}"),
+                &col[..3],
+                &proj.color[i],
+                1e-6,
+                1e-5,
+            );
         }
-        visible += 1;
-        close_abs(
-            &format!("{ctx}: mean2d {i}"),
-            &a[..2],
-            &proj.mean2d[i],
-            1e-3,
-            1e-6,
+        assert!(
+            visible > n / 3,
+            "{ctx}: only {visible} of {n} visible: the scene tests little"
         );
+
+        let bp = twin::BlendParams {
+            width: w,
+            height: h,
+            alpha_max: opts.alpha_max,
+            background: opts.background,
+            feature_dims: k,
+        };
+        let fwd = twin::blend_fwd(&bp, &proj, &scene.features);
+        let px = (w * h) as usize;
+        let rgb: Vec<f32> = out.rgba.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
+        let alpha: Vec<f32> = out.rgba.iter().map(|p| p[3]).collect();
         close_abs(
-            &format!("{ctx}: depth {i}"),
-            &a[2..3],
-            &[proj.depth[i]],
+            &format!("{ctx}: rgb"),
+            &rgb,
+            fwd.rgb.as_flattened(),
+            2e-5,
             0.0,
-            1e-6,
         );
+        close_abs(&format!("{ctx}: alpha"), &alpha, &fwd.alpha, 2e-5, 0.0);
+        close_abs(&format!("{ctx}: depth"), &out.depth, &fwd.depth, 2e-5, 2e-5);
         close_abs(
-            &format!("{ctx}: opacity {i}"),
-            &a[3..4],
-            &[proj.opacity[i]],
-            1e-7,
-            1e-6,
-        );
-        close_abs(
-            &format!("{ctx}: conic {i}"),
-            &c[..3],
-            &proj.conic[i],
-            1e-7,
+            &format!("{ctx}: final T"),
+            &out.final_t,
+            &fwd.final_t,
+            2e-5,
             1e-4,
         );
         close_abs(
-            &format!("{ctx}: colour {i}"),
-            &col[..3],
-            &proj.color[i],
-            1e-6,
-            1e-5,
+            &format!("{ctx}: features"),
+            &out.features,
+            &fwd.features,
+            2e-5,
+            2e-5,
         );
-    }
-    assert!(
-        visible > n / 3,
-        "{ctx}: only {visible} of {n} visible: the scene tests little"
-    );
+        let diff = out
+            .n_contrib
+            .iter()
+            .zip(&fwd.n_contrib)
+            .filter(|(a, b)| a != b)
+            .count();
+        assert_eq!(
+            diff, 0,
+            "{ctx}: {diff} pixels disagree on the last contributor"
+        );
 
-    let bp = twin::BlendParams {
-        width: w,
-        height: h,
-        alpha_max: opts.alpha_max,
-        background: opts.background,
-        feature_dims: k,
-    };
-    let fwd = twin::blend_fwd(&bp, &proj, &scene.features);
-    let px = (w * h) as usize;
-    let rgb: Vec<f32> = out.rgba.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
-    let alpha: Vec<f32> = out.rgba.iter().map(|p| p[3]).collect();
-    close_abs(
-        &format!("{ctx}: rgb"),
-        &rgb,
-        fwd.rgb.as_flattened(),
-        2e-5,
-        0.0,
-    );
-    close_abs(&format!("{ctx}: alpha"), &alpha, &fwd.alpha, 2e-5, 0.0);
-    close_abs(&format!("{ctx}: depth"), &out.depth, &fwd.depth, 2e-5, 2e-5);
-    close_abs(
-        &format!("{ctx}: final T"),
-        &out.final_t,
-        &fwd.final_t,
-        2e-5,
-        1e-4,
-    );
-    close_abs(
-        &format!("{ctx}: features"),
-        &out.features,
-        &fwd.features,
-        2e-5,
-        2e-5,
-    );
-    let diff = out
-        .n_contrib
-        .iter()
-        .zip(&fwd.n_contrib)
-        .filter(|(a, b)| a != b)
-        .count();
-    assert_eq!(
-        diff, 0,
-        "{ctx}: {diff} pixels disagree on the last contributor"
-    );
-
-    let u = upstream(seed + 100, px, k as usize);
-    let bg = twin_blend_bwd(&bp, &proj, &scene.features, &fwd, &u);
-    let pg = twin::project_bwd(&tcam, &g, &proj, &bg);
-    for (v, grads) in backward_each(&gpu, &mut rast, &b, &cam, &up, &opts, &u) {
-        let ctx = format!("{ctx}, blend_bwd {}", v.name());
-        check_grads(&ctx, n, &grads, &bg, &pg);
+        let u = upstream(seed + 100, px, k as usize);
+        let bg = twin_blend_bwd(&bp, &proj, &scene.features, &fwd, &u);
+        let pg = twin::project_bwd(&tcam, &g, &proj, &bg);
+        for (v, grads) in backward_each(&gpu, &mut rast, &b, &cam, &up, &opts, &u) {
+            let ctx = format!("{ctx}, blend_bwd {}", v.name());
+            check_grads(&ctx, n, &grads, &bg, &pg);
+        }
     }
 }
 

@@ -1,12 +1,12 @@
-//! Scenes shaped like the issue-14 workloads for the rasteriser bench, and the blend-backward
-//! variant comparison on them (variants interleaved within each repetition, so load on a shared
-//! machine hits all of them alike).
+//! Scenes shaped like the issue-14 workloads for the rasteriser bench, and the blend-forward and
+//! blend-backward variant comparisons on them (all variants interleaved within each repetition,
+//! so load on a shared machine hits all of them alike).
 
 use super::{median, BenchRow, RasterCase};
 use crate::data::synthetic::{sample_points, GenCamera};
 use crate::error::{Error, Result};
 use crate::kernels::raster::G2D_STRIDE;
-use crate::kernels::raster::{BlendBwdVariant, Camera};
+use crate::kernels::raster::{BlendBwdVariant, BlendFwdVariant, Camera};
 use crate::testing::Noise;
 use crate::vk::Gpu;
 
@@ -142,41 +142,61 @@ fn builtin(n: usize) -> (HostSplats, Camera) {
     (h, cam)
 }
 
-/// Blend backward alone, every variant on each scene, `reps` interleaved repetitions (after one
-/// warm-up each): one row per (scene, variant) with the median GPU ms of the blend_bwd
-/// dispatch and, in its name, the speed-up over the subgroup-atomic kernel (M elements/s
-/// counts tile hits).
-pub fn blend_bwd_rows(gpu: &Gpu, scenes: &[RasterScene], reps: usize) -> Result<Vec<BenchRow>> {
+/// Median GPU ms of the dispatches whose label contains `kernel`.
+fn blend_ms(t: &crate::vk::Timings, kernel: &str) -> f64 {
+    t.by_label()
+        .iter()
+        .filter(|(l, _)| l.contains(kernel))
+        .map(|(_, ms)| ms)
+        .sum()
+}
+
+/// Blend forward and blend backward, every variant of each on each scene, `reps` interleaved
+/// repetitions (after one warm-up each): one row per (scene, pass, variant) with the median GPU
+/// ms of the blend dispatch alone and, in its name, the speed-up over the GPU-shaped kernel
+/// (shared / subgroup-atomic; M elements/s counts tile hits). Each backward reads the outputs
+/// of the forward just before it (the last forward variant's).
+pub fn blend_rows(gpu: &Gpu, scenes: &[RasterScene], reps: usize) -> Result<Vec<BenchRow>> {
     let mut rows = Vec::new();
     for &scene in scenes {
         let (h, cam) = scene.build();
         let mut case = RasterCase::from_host(gpu, &h, cam)?;
         let isect = case.intersections(gpu)?;
+        verify_fwd_variants(gpu, &mut case, scene)?;
         verify_variants(gpu, &mut case, scene)?;
-        let mut ms = vec![Vec::new(); BlendBwdVariant::ALL.len()];
+        let (nf, nb) = (BlendFwdVariant::ALL.len(), BlendBwdVariant::ALL.len());
+        let mut ms = vec![Vec::new(); nf + nb];
         for rep in 0..=reps.max(1) {
+            for (i, &v) in BlendFwdVariant::ALL.iter().enumerate() {
+                case.set_blend_fwd_variant(v);
+                let t = case.run(gpu, false)?;
+                if rep > 0 {
+                    ms[i].push(blend_ms(&t, "blend_fwd"));
+                }
+            }
             for (i, &v) in BlendBwdVariant::ALL.iter().enumerate() {
                 case.set_blend_bwd_variant(v);
                 let t = case.run_backward(gpu)?;
-                let blend: f64 = t
-                    .by_label()
-                    .iter()
-                    .filter(|(l, _)| l.starts_with("blend_bwd"))
-                    .map(|(_, ms)| ms)
-                    .sum();
                 if rep > 0 {
-                    ms[i].push(blend);
+                    ms[nf + i].push(blend_ms(&t, "blend_bwd"));
                 }
             }
         }
         let med: Vec<f64> = ms.into_iter().map(median).collect();
-        for (i, &v) in BlendBwdVariant::ALL.iter().enumerate() {
+        let names = BlendFwdVariant::ALL
+            .iter()
+            .map(|v| ("blend_fwd", v.name(), "shared", 0))
+            .chain(
+                BlendBwdVariant::ALL
+                    .iter()
+                    .map(|v| ("blend_bwd", v.name(), "subgroup-atomic", nf)),
+            );
+        for (i, (pass, name, base, b)) in names.enumerate() {
             rows.push(BenchRow {
                 kernel: format!(
-                    "blend_bwd {} {} ({isect} tile hits, {:.2}× subgroup-atomic)",
-                    v.name(),
+                    "{pass} {name} {} ({isect} tile hits, {:.2}× {base})",
                     scene.label(),
-                    med[0] / med[i]
+                    med[b] / med[i]
                 ),
                 n: case.n,
                 median_ms: med[i],
@@ -186,6 +206,36 @@ pub fn blend_bwd_rows(gpu: &Gpu, scenes: &[RasterScene], reps: usize) -> Result<
         }
     }
     Ok(rows)
+}
+
+/// Every forward variant's outputs against the shared-memory kernel's before timing: the same
+/// last contributor per pixel and rgba, depth and final T within 2e-5 + 2e-5 · |value| (the
+/// raster_twin tolerances; both variants run the same per-pixel operations in the same order).
+fn verify_fwd_variants(gpu: &Gpu, case: &mut RasterCase, scene: RasterScene) -> Result<()> {
+    let mut outs = Vec::new();
+    for v in BlendFwdVariant::ALL {
+        case.set_blend_fwd_variant(v);
+        case.run(gpu, false)?;
+        outs.push(case.forward_outputs(gpu)?);
+    }
+    let (want_f, want_n) = &outs[0];
+    for (v, (got_f, got_n)) in BlendFwdVariant::ALL.iter().zip(&outs).skip(1) {
+        let bad_n = want_n.iter().zip(got_n).filter(|(a, b)| a != b).count();
+        let bad_f = want_f
+            .iter()
+            .zip(got_f)
+            .filter(|(a, b)| !b.is_finite() || (*a - *b).abs() > 2e-5 + 2e-5 * a.abs())
+            .count();
+        if bad_n + bad_f > 0 {
+            return Err(Error::Invalid(format!(
+                "blend_fwd {} on {}: {bad_n} pixels differ from shared in their last contributor, \
+                 {bad_f} rgba/depth/T values beyond 2e-5",
+                v.name(),
+                scene.label()
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Every variant's 2D gradients against the subgroup-atomic kernel's, per component kind

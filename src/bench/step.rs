@@ -20,19 +20,22 @@ use crate::vk::{Gpu, Recorder, Timings};
 pub struct KernelSet {
     pub name: &'static str,
     pub mlp: &'static str,
+    pub blend_fwd: &'static str,
     pub blend_bwd: &'static str,
 }
 
 /// The choice before issue 14 and the CPU default after it.
 pub const KERNEL_SETS: [KernelSet; 2] = [
     KernelSet {
-        name: "tiled MLP + subgroup-atomic blend bwd (before)",
+        name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
         mlp: "tiled",
+        blend_fwd: "shared",
         blend_bwd: "subgroup-atomic",
     },
     KernelSet {
-        name: "rows MLP + tile-accum blend bwd",
+        name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd",
         mlp: "rows",
+        blend_fwd: "tile-regs",
         blend_bwd: "tile-accum",
     },
 ];
@@ -89,12 +92,14 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             let mut trainers = Vec::new();
             for k in KERNEL_SETS {
                 std::env::set_var("DISPFLOW_MLP_KERNELS", k.mlp);
+                std::env::set_var("DISPFLOW_BLEND_FWD", k.blend_fwd);
                 std::env::set_var("DISPFLOW_BLEND_BWD", k.blend_bwd);
                 let mut tr = Trainer::new(gpu, &cfg, &data)?;
                 tr.step(false, false)?; // builds the passes with this kernel set
                 trainers.push(tr);
             }
             std::env::remove_var("DISPFLOW_MLP_KERNELS");
+            std::env::remove_var("DISPFLOW_BLEND_FWD");
             std::env::remove_var("DISPFLOW_BLEND_BWD");
             let mut times: Vec<Vec<Timings>> = vec![Vec::new(); trainers.len()];
             for _ in 0..warm {

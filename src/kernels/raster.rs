@@ -1,7 +1,8 @@
 //! The differentiable tile rasteriser (`glsl/raster/*.comp`). CPU twin: `reference::raster`.
 //!
 //! Forward: `project` → scan of tiles touched → `bin_total` → `bin_emit` ((tile | depth) keys)
-//! → radix sort (only `32 + tile_bits` bits) → `bin_ranges` → `blend_fwd`.
+//! → radix sort (only `32 + tile_bits` bits) → `bin_ranges` → `blend_fwd` (one of
+//! `BlendFwdVariant`).
 //! Backward: `blend_bwd` (accumulates per-splat 2D gradients; one of `BlendBwdVariant`) →
 //! `project_bwd`.
 //! Nothing is read back inside a pass; the intersection count drives the sort and the range
@@ -310,12 +311,56 @@ impl BlendBwdVariant {
     }
 }
 
+/// How `blend_fwd` walks a tile. Both variants blend each pixel with the same float
+/// operations in the same order (tests compare every variant with the twin, and either
+/// variant's `final_t`/`n_contrib` feed every `BlendBwdVariant`); they differ in speed per
+/// device. Discriminants index `Rasterizer::blend_fwd`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BlendFwdVariant {
+    /// 16×16 invocations per tile, one pixel each, splats staged in shared memory in batches
+    /// of 256 behind barriers (`blend_fwd.glsl`). GPU-shaped.
+    Shared,
+    /// 8 invocations per tile, 32 pixels each in registers; splats read with uniform loads, no
+    /// barriers, no shared memory (`blend_fwd_tile.glsl`). CPU-shaped.
+    TileRegs,
+}
+
+impl BlendFwdVariant {
+    pub const ALL: [BlendFwdVariant; 2] = [BlendFwdVariant::Shared, BlendFwdVariant::TileRegs];
+
+    /// The default for a device: pixels in registers on CPU devices (lavapipe, `bench --suite
+    /// raster`); the shared-memory kernel on GPUs, where an 8-invocation workgroup per tile
+    /// would leave most of a warp idle (not measured there yet).
+    /// `DISPFLOW_BLEND_FWD=shared|tile-regs` overrides the choice (benches, tests).
+    pub fn for_device(info: &crate::vk::DeviceInfo) -> Self {
+        match std::env::var("DISPFLOW_BLEND_FWD").as_deref() {
+            Ok("shared") => return BlendFwdVariant::Shared,
+            Ok("tile-regs") => return BlendFwdVariant::TileRegs,
+            _ => {}
+        }
+        if info.kind == "CPU" {
+            BlendFwdVariant::TileRegs
+        } else {
+            BlendFwdVariant::Shared
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            BlendFwdVariant::Shared => "shared",
+            BlendFwdVariant::TileRegs => "tile-regs",
+        }
+    }
+}
+
 pub struct Rasterizer {
     project: ComputePipeline,
     bin_total: ComputePipeline,
     bin_emit: ComputePipeline,
     bin_ranges: ComputePipeline,
-    blend_fwd: [ComputePipeline; 3],
+    /// Per variant (its discriminant), per feature count.
+    blend_fwd: [[ComputePipeline; 3]; 2],
+    blend_fwd_variant: BlendFwdVariant,
     /// Per variant (its discriminant), per feature count.
     blend_bwd: [[ComputePipeline; 3]; 2],
     blend_bwd_variant: BlendBwdVariant,
@@ -346,10 +391,18 @@ impl Rasterizer {
             bin_emit: gpu.pipeline(&r::BIN_EMIT)?,
             bin_ranges: gpu.pipeline(&r::BIN_RANGES)?,
             blend_fwd: [
-                gpu.pipeline(&r::BLEND_FWD_F0)?,
-                gpu.pipeline(&r::BLEND_FWD_F2)?,
-                gpu.pipeline(&r::BLEND_FWD_F3)?,
+                [
+                    gpu.pipeline(&r::BLEND_FWD_F0)?,
+                    gpu.pipeline(&r::BLEND_FWD_F2)?,
+                    gpu.pipeline(&r::BLEND_FWD_F3)?,
+                ],
+                [
+                    gpu.pipeline(&r::BLEND_FWD_TILE_F0)?,
+                    gpu.pipeline(&r::BLEND_FWD_TILE_F2)?,
+                    gpu.pipeline(&r::BLEND_FWD_TILE_F3)?,
+                ],
             ],
+            blend_fwd_variant: BlendFwdVariant::for_device(&gpu.info),
             blend_bwd: [
                 [
                     gpu.pipeline(&r::BLEND_BWD_F0)?,
@@ -367,6 +420,16 @@ impl Rasterizer {
             scan: PrefixSum::new(gpu)?,
             sort: RadixSort::new(gpu)?,
         })
+    }
+
+    /// The blend-forward variant `forward` records.
+    pub fn blend_fwd_variant(&self) -> BlendFwdVariant {
+        self.blend_fwd_variant
+    }
+
+    /// Chooses the blend-forward variant (benches and tests compare them on one device).
+    pub fn set_blend_fwd_variant(&mut self, v: BlendFwdVariant) {
+        self.blend_fwd_variant = v;
     }
 
     /// The blend-backward variant `backward` records.
@@ -584,7 +647,7 @@ impl Rasterizer {
             binds.extend([f, b.out_features.all()]);
         }
         rec.dispatch(
-            &self.blend_fwd[variant(g.feature_dims()).unwrap()],
+            &self.blend_fwd[self.blend_fwd_variant as usize][variant(g.feature_dims()).unwrap()],
             &bp,
             &binds,
             [tx.max(1), ty.max(1), 1],

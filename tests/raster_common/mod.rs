@@ -2,8 +2,8 @@
 #![allow(dead_code)]
 
 use dispflow_vk::kernels::raster::{
-    join_sh, split_sh, BlendBwdVariant, Camera, OutputGrads, RasterBuffers, RasterSize, Rasterizer,
-    RenderOpts, SplatInputs,
+    join_sh, split_sh, BlendBwdVariant, BlendFwdVariant, Camera, OutputGrads, RasterBuffers,
+    RasterSize, Rasterizer, RenderOpts, SplatInputs,
 };
 use dispflow_vk::testing::{self, Noise, TestGpu};
 use dispflow_vk::vk::{Buffer, Recorder};
@@ -148,6 +148,7 @@ impl Uploaded {
     }
 }
 
+#[derive(Clone)]
 pub struct Rendered {
     pub rgba: Vec<[f32; 4]>,
     pub depth: Vec<f32>,
@@ -196,6 +197,28 @@ pub fn render(
             .unwrap(),
     };
     (b, out)
+}
+
+/// [`render`] once per blend-forward variant (every GPU-vs-twin forward comparison runs them
+/// all), each into its own buffers; leaves `rast` on its default variant.
+pub fn render_each(
+    gpu: &TestGpu,
+    rast: &mut Rasterizer,
+    cam: &Camera,
+    up: &Uploaded,
+    opts: &RenderOpts,
+) -> Vec<(BlendFwdVariant, RasterBuffers, Rendered)> {
+    let default = rast.blend_fwd_variant();
+    let out = BlendFwdVariant::ALL
+        .iter()
+        .map(|&v| {
+            rast.set_blend_fwd_variant(v);
+            let (b, r) = render(gpu, rast, cam, up, opts);
+            (v, b, r)
+        })
+        .collect();
+    rast.set_blend_fwd_variant(default);
+    out
 }
 
 pub struct Grads {

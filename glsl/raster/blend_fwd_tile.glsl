@@ -1,0 +1,112 @@
+// Blend forward, pixels in registers: the same maths as blend_fwd.glsl (read its header), one
+// workgroup per 16×16 tile with TILE²/PX invocations, each owning PX pixels of the tile (pixel
+// q = invocation + WG·i) with their blend state in registers. Each subgroup walks the tile's
+// depth-sorted splats front to back on its own (no barrier, no shared memory): the splat
+// record is a uniform (broadcast) load, then the PX pixels are blended in order, exactly as
+// blend_fwd.glsl blends its one pixel, so per pixel the float operations and their order are
+// the same. The walk stops once every pixel of the subgroup is saturated (a uniform break).
+//
+// Why on lavapipe: a workgroup is ceil(WG/8) coroutines of 8 SIMD lanes, and every barrier()
+// suspends and resumes each of them; shared-memory accesses are per-lane scalar loops. The
+// shared-memory kernel pays 4 barriers and 256 per-lane staging loads per batch of 256 splats
+// and reads every splat from shared memory per lane; with PX = 32 the workgroup is one
+// coroutine and a splat is one broadcast load. On a GPU the 8-invocation workgroup leaves most
+// of a warp idle: the host keeps the shared-memory kernel there.
+#extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_vote : require
+#include "common.glsl"
+#include "params.glsl"
+#include "raster.glsl"
+
+#define WG (TILE * TILE / PX)
+layout(local_size_x = WG) in;
+
+layout(push_constant) uniform Push { BlendParams pc; };
+layout(std430, binding = 0) readonly buffer Ranges { uvec2 ranges[]; };
+layout(std430, binding = 1) readonly buffer Ids { uint ids[]; };         // sorted Gaussian ids
+layout(std430, binding = 2) readonly buffer Splats { vec4 splats[]; };
+layout(std430, binding = 3) writeonly buffer OutRgba { vec4 out_rgba[]; }; // rgb + alpha
+layout(std430, binding = 4) writeonly buffer OutDepth { float out_depth[]; }; // Σ w z
+layout(std430, binding = 5) writeonly buffer FinalT { float final_t[]; };
+layout(std430, binding = 6) writeonly buffer NContrib { uint n_contrib[]; };
+#if FEAT > 0
+layout(std430, binding = 7) readonly buffer Feat { float feat[]; };         // [N,FEAT]
+layout(std430, binding = 8) writeonly buffer OutFeat { float out_feat[]; }; // [H·W,FEAT]
+#endif
+
+void main() {
+    uint t = gl_LocalInvocationID.x;
+    uint tile = gl_WorkGroupID.y * pc.tiles_x + gl_WorkGroupID.x;
+    uvec2 range = ranges[tile];
+    uvec2 origin = gl_WorkGroupID.xy * TILE;
+
+    // Per pixel: transmittance, colour, depth, features, last contributor (1-based, 0: none).
+    float T[PX], D[PX];
+    vec3 C[PX];
+    uint last[PX];
+#if FEAT > 0
+    float F[PX * FEAT];
+#endif
+    uint live = 0u; // bit i: pixel i is inside the image and not yet saturated
+    for (int i = 0; i < PX; ++i) {
+        uint q = t + WG * uint(i);
+        uvec2 pix = origin + uvec2(q % TILE, q / TILE);
+        if (pix.x < pc.width && pix.y < pc.height) live |= 1u << uint(i);
+        T[i] = 1.0;
+        C[i] = vec3(0.0);
+        D[i] = 0.0;
+        last[i] = 0u;
+#if FEAT > 0
+        for (int c = 0; c < FEAT; ++c) F[i * FEAT + c] = 0.0;
+#endif
+    }
+
+    for (uint j = range.x; j < range.y; ++j) {
+        if (subgroupAll(live == 0u)) break;
+        uint gid = ids[j]; // uniform: broadcast loads below
+        vec4 a = splats[SPLAT_STRIDE * gid];
+        vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
+        vec3 col = splats[SPLAT_STRIDE * gid + 2].rgb;
+#if FEAT > 0
+        float f[FEAT];
+        for (int c = 0; c < FEAT; ++c) f[c] = feat[gid * FEAT + c];
+#endif
+        uint seen = j - range.x + 1u;
+        for (int i = 0; i < PX; ++i) {
+            if ((live & (1u << uint(i))) == 0u) continue;
+            uint q = t + WG * uint(i);
+            vec2 centre = vec2(origin + uvec2(q % TILE, q / TILE)) + 0.5;
+            vec2 d = a.xy - centre;
+            float sigma = splat_sigma(con, d);
+            float alpha = min(pc.alpha_max, a.w * exp(-sigma));
+            if (alpha < ALPHA_MIN) continue;
+            float test_t = T[i] * (1.0 - alpha);
+            if (test_t < T_STOP) {
+                live &= ~(1u << uint(i));
+                continue;
+            }
+            float w = alpha * T[i];
+            C[i] += w * col;
+            D[i] += w * a.z;
+#if FEAT > 0
+            for (int c = 0; c < FEAT; ++c) F[i * FEAT + c] += w * f[c];
+#endif
+            T[i] = test_t;
+            last[i] = seen;
+        }
+    }
+
+    for (int i = 0; i < PX; ++i) {
+        uint q = t + WG * uint(i);
+        uvec2 pix = origin + uvec2(q % TILE, q / TILE);
+        if (pix.x >= pc.width || pix.y >= pc.height) continue;
+        uint p = pix.y * pc.width + pix.x;
+        out_rgba[p] = vec4(C[i] + T[i] * pc.background.rgb, 1.0 - T[i]);
+        out_depth[p] = D[i];
+        final_t[p] = T[i];
+        n_contrib[p] = last[i];
+#if FEAT > 0
+        for (int c = 0; c < FEAT; ++c) out_feat[p * FEAT + c] = F[i * FEAT + c];
+#endif
+    }
+}
