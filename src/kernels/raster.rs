@@ -384,6 +384,14 @@ impl Rasterizer {
                 why: "blend_bwd folds per-pixel gradients with subgroupAdd before its atomics",
             });
         }
+        if !gpu.info.subgroup_vote {
+            return Err(Error::MissingFeature {
+                device: gpu.info.name.clone(),
+                feature: "subgroup vote (VK_SUBGROUP_FEATURE_VOTE_BIT)",
+                why:
+                    "the blend kernels skip finished splats and tiles with subgroupAny/subgroupAll",
+            });
+        }
         use shaders::raster as r;
         Ok(Rasterizer {
             project: gpu.pipeline(&r::PROJECT)?,

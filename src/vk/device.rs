@@ -55,6 +55,7 @@ pub struct DeviceInfo {
     /// Queried, never assumed (lavapipe: 8, NVIDIA: 32, AMD: 64).
     pub subgroup_size: u32,
     pub subgroup_arithmetic: bool,
+    pub subgroup_vote: bool,
     pub subgroup_ballot: bool,
     pub subgroup_shuffle: bool,
     pub max_shared_memory: u32,
@@ -533,6 +534,7 @@ impl Gpu {
             api_version: version(p.api_version),
             subgroup_size: subgroup.subgroup_size,
             subgroup_arithmetic: ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
+            subgroup_vote: ops.contains(vk::SubgroupFeatureFlags::VOTE),
             subgroup_ballot: ops.contains(vk::SubgroupFeatureFlags::BALLOT),
             subgroup_shuffle: ops.contains(vk::SubgroupFeatureFlags::SHUFFLE),
             max_shared_memory: p.limits.max_compute_shared_memory_size,
