@@ -1,6 +1,7 @@
 //! Built-in synthetic scene: analytic primitives (not Gaussians) ray-cast on the CPU, with exact
 //! motion masks and ground-truth 2D scene flow, written in the nerfies format so the same loader
-//! is exercised.
+//! is exercised. Over 600 lines: the scene's geometry, its exact motion and flow, and the
+//! nerfies writer are one generator whose parts must agree frame by frame.
 //!
 //! The scene (world y up, raw units):
 //! - a static room (box interior) with a checker + value-noise texture on every wall;

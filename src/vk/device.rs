@@ -63,8 +63,7 @@ pub struct DeviceInfo {
     pub max_workgroup_count: [u32; 3],
     pub max_storage_buffer_range: u32,
     pub min_storage_buffer_offset_alignment: u64,
-    /// Largest uniform-buffer range one binding may cover (lavapipe: 64 KiB).
-    pub max_uniform_buffer_range: u32,
+    pub max_uniform_buffer_range: u32, // lavapipe: 64 KiB (the register MLP's weight windows)
     pub min_uniform_buffer_offset_alignment: u64,
     pub max_push_constants: u32,
     /// Nanoseconds per timestamp tick; `None` when the compute queue has no timestamps.
