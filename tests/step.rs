@@ -541,6 +541,7 @@ mod gpu_step {
     use dispflow_vk::kernels::raster::Rasterizer;
     use dispflow_vk::model::gaussians::Section;
     use dispflow_vk::model::state::{mlp_config_for, DeformState, GaussianState, Model};
+    use dispflow_vk::model::dynamic::DynamicSet;
     use dispflow_vk::reference::step::{dispflow_step, NormGradMode, StepOutputs};
     use dispflow_vk::testing;
     use dispflow_vk::train::config::{DensifyConfig, MotionOrder};
@@ -575,6 +576,7 @@ mod gpu_step {
         let model = Model {
             gaussians: GaussianState::new(gpu, cap, s.sh_degree, &s.gaussians).unwrap(),
             deform,
+            dynamic: DynamicSet::new(gpu, cap).unwrap(),
         };
         for b in [&model.gaussians.grads, &model.deform.grads] {
             testing::fill_noise(gpu, b, 7);

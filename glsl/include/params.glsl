@@ -371,4 +371,24 @@ struct LpipsDiffParams {
     uint pad1;
 };
 
+// src/kernels/sparse.rs: one sample of the motion probe (D at one time over every Gaussian).
+struct ProbeParams {
+    uint n;             // Gaussians
+    uint num_cams;      // training cameras (>= 1)
+    uint first;         // 1: the first sample (the running maximum starts here)
+    uint last;          // 1: the last sample (the flags are written)
+    float threshold_px; // apparent motion (pixels) above which a Gaussian is dynamic
+    float near;         // distances to a camera are clamped to at least this (scene units)
+    uint pad0;
+    uint pad1;
+};
+
+// src/kernels/sparse.rs: compaction of the dynamic set and row gather/expand.
+struct RowsParams {
+    uint n;     // rows processed (Gaussians for compact/expand, dynamic rows for gather)
+    uint width; // floats per row
+    uint pad0;
+    uint pad1;
+};
+
 #endif

@@ -5,7 +5,7 @@ use serde::Serialize;
 
 use super::FrameEval;
 use crate::report::{self, Table};
-use crate::train::config::{MotionFlow, MotionOrder, NormGrad, TrainConfig};
+use crate::train::config::{DeformMode, MotionFlow, MotionOrder, NormGrad, TrainConfig};
 
 /// Scores of a run on its test split.
 #[derive(Debug, Serialize)]
@@ -38,6 +38,12 @@ pub struct Report {
     /// Median wall-clock milliseconds per training step (`train` only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ms_per_step: Option<f64>,
+    /// Fraction of the Gaussians the deformation moves at the end (1 = dense model).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dynamic_fraction: Option<f64>,
+    /// Mean dynamic fraction over the training steps that ran the MLP (`train` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_dynamic_fraction: Option<f64>,
     pub per_frame: Vec<FrameEval>,
 }
 
@@ -74,6 +80,8 @@ impl Report {
             flow_mmap,
             initial_psnr: None,
             ms_per_step: None,
+            dynamic_fraction: None,
+            mean_dynamic_fraction: None,
             per_frame: per,
         }
     }
@@ -119,6 +127,9 @@ pub fn mean(v: impl Iterator<Item = f64>) -> f64 {
 
 /// "DispFlow-GS (α=0.1)" or "Deformable-3DGS" from the run's configuration.
 pub fn method_name(cfg: &TrainConfig) -> String {
+    if cfg.deform == DeformMode::Off {
+        return "3DGS".into();
+    }
     if cfg.motion_weight <= 0.0 {
         return "Deformable-3DGS".into();
     }

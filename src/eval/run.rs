@@ -27,6 +27,8 @@ pub struct Run {
     pub iterations: u32,
     pub gaussians: HostGaussians,
     pub mlp: Vec<f32>,
+    /// The dynamic/static split (`dynamic.bin`, a byte per Gaussian); `None`: all dynamic.
+    pub dynamic: Option<Vec<u32>>,
 }
 
 fn invalid(path: &Path, why: impl std::fmt::Display) -> Error {
@@ -155,6 +157,32 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
             ),
         ));
     }
+    let dyn_path = dir.join("dynamic.bin");
+    let dynamic = if dyn_path.is_file() {
+        let b = std::fs::read(&dyn_path).map_err(|source| Error::Io {
+            path: dyn_path.display().to_string(),
+            source,
+        })?;
+        if b.len() != gaussians.len() {
+            return Err(invalid(
+                &dyn_path,
+                format!(
+                    "{} bytes; point_cloud.ply's {} Gaussians need one byte each",
+                    b.len(),
+                    gaussians.len()
+                ),
+            ));
+        }
+        if let Some(i) = b.iter().position(|&v| v > 1) {
+            return Err(invalid(
+                &dyn_path,
+                format!("byte {i} is {}; expected 0 (static) or 1 (dynamic)", b[i]),
+            ));
+        }
+        Some(b.iter().map(|&v| v as u32).collect())
+    } else {
+        None
+    };
     Ok(Run {
         dir: dir.to_path_buf(),
         cfg,
@@ -162,6 +190,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
         iterations,
         gaussians,
         mlp,
+        dynamic,
     })
 }
 
@@ -171,6 +200,7 @@ pub fn load_trainer<'g>(gpu: &'g Gpu, run: &Run) -> Result<(Dataset, Trainer<'g>
     let mut tr = Trainer::new(gpu, &run.cfg, &ds)?;
     tr.load_model(&run.gaussians, &run.mlp, run.iterations)
         .map_err(|e| invalid(&run.dir, format!("the saved model does not load: {e}")))?;
+    tr.model.dynamic.upload(gpu, run.dynamic.as_deref())?;
     Ok((ds, tr))
 }
 

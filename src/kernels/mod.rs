@@ -16,6 +16,7 @@ pub mod motion;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;
+pub mod sparse;
 
 /// (Rust struct name, size in bytes, [(field, byte offset)]) of one push-constant struct.
 pub type ParamLayout = (&'static str, usize, Vec<(&'static str, usize)>);
@@ -31,6 +32,18 @@ pub fn param_layouts() -> Vec<ParamLayout> {
     vec![
         layout!(dispflow::DispFlowParams, n, weight, pad0, pad1),
         layout!(deform::DeformParams, n, pad0, pad1, pad2),
+        layout!(
+            sparse::ProbeParams,
+            n,
+            num_cams,
+            first,
+            last,
+            threshold_px,
+            near,
+            pad0,
+            pad1
+        ),
+        layout!(sparse::RowsParams, n, width, pad0, pad1),
         layout!(
             densify::DensifyStatsParams,
             num_gaussians,

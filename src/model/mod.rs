@@ -2,6 +2,7 @@
 //! layout, initialisation, optimiser settings) and their GPU state (`state`).
 
 pub mod deform;
+pub mod dynamic;
 pub mod gaussians;
 pub mod optim;
 pub mod state;

@@ -4,6 +4,7 @@
 //! trainer never reaches into a pass for model data.
 
 use super::deform::{MlpConfig, MlpLayout, TimeEncoding};
+use super::dynamic::DynamicSet;
 use super::gaussians::{GaussianLayout, HostGaussians, Section};
 use crate::error::{Error, Result};
 use crate::kernels::deform::Canonical;
@@ -218,6 +219,8 @@ pub fn mlp_config_for(synthetic: bool, depth: u32, width: u32) -> MlpConfig {
 pub struct Model {
     pub gaussians: GaussianState,
     pub deform: DeformState,
+    /// Which Gaussians the deformation moves (all, until the first classification).
+    pub dynamic: DynamicSet,
 }
 
 /// What a model was built for that its blobs do not show: MLP depth and width (the parameter
@@ -242,6 +245,8 @@ pub struct ModelSnapshot {
     pub mlp_params: Vec<f32>,
     pub mlp_m: Vec<f32>,
     pub mlp_v: Vec<f32>,
+    /// Dynamic flags per Gaussian (0/1) when the model is split; `None` when dense.
+    pub dynamic: Option<Vec<u32>>,
 }
 
 /// One named array of a snapshot, as checkpoints store it.
@@ -344,6 +349,7 @@ impl Model {
             mlp_params: gpu.read(d.params.all())?,
             mlp_m: gpu.read(d.m.all())?,
             mlp_v: gpu.read(d.v.all())?,
+            dynamic: self.dynamic.download(gpu, g.n)?,
         })
     }
 
@@ -404,6 +410,20 @@ impl Model {
             }
             b.check_values()?;
         }
+        if let Some(f) = &s.dynamic {
+            if f.len() != n {
+                return mismatch(format!(
+                    "blob dynamic: {} flags; {n} Gaussians need {n}",
+                    f.len()
+                ));
+            }
+            if let Some(i) = f.iter().position(|&v| v > 1) {
+                return mismatch(format!(
+                    "blob dynamic: element {i} (Gaussian {i}) is {}; expected 0 or 1",
+                    f[i]
+                ));
+            }
+        }
         Ok(())
     }
 
@@ -420,6 +440,7 @@ impl Model {
         gpu.upload(d.params.all(), &s.mlp_params)?;
         gpu.upload(d.m.all(), &s.mlp_m)?;
         gpu.upload(d.v.all(), &s.mlp_v)?;
+        self.dynamic.upload(gpu, s.dynamic.as_deref())?;
         Ok(())
     }
 

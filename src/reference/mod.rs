@@ -15,4 +15,5 @@ pub mod radix_sort;
 pub mod raster;
 pub mod scan;
 pub mod sh;
+pub mod sparse;
 pub mod step;

@@ -6,6 +6,7 @@
 //! format version, the iteration, the model's shape (SH coefficients, MLP depth and width,
 //! Gaussian budget) and per blob its name, length in floats and FNV-1a 64 of its bytes (hex).
 //! Every length and checksum is checked on read; a mismatch names the file and the blob.
+//! The optional blob `dynamic` (0.0/1.0 per Gaussian) is the model's dynamic/static split.
 //! Small and dependency-free.
 
 use std::collections::BTreeMap;
@@ -172,6 +173,12 @@ impl Checkpoint {
         for (k, v) in DENSIFY_STATS.iter().zip(&self.densify_stats) {
             blobs.push((k.to_string(), v));
         }
+        // Flags as 0.0/1.0 (every blob is f32); absent while the model is dense.
+        let dynamic: Option<Vec<f32>> = (self.model.dynamic.as_ref())
+            .map(|f| f.iter().map(|&v| v as f32).collect());
+        if let Some(d) = &dynamic {
+            blobs.push(("dynamic".to_string(), d));
+        }
         let header = Header {
             version: CHECKPOINT_VERSION,
             iteration: self.iteration,
@@ -309,6 +316,28 @@ impl Checkpoint {
         if mlp_m.len() != mlp_params.len() || mlp_v.len() != mlp_params.len() {
             return Err(bad(path, "MLP moments disagree with the parameter count"));
         }
+        let dynamic = match m.remove("dynamic") {
+            None => None,
+            Some(d) if d.len() != n => {
+                return Err(bad(
+                    path,
+                    &format!("blob dynamic: {} flags; {n} Gaussians need {n}", d.len()),
+                ))
+            }
+            Some(d) => Some(
+                d.iter()
+                    .enumerate()
+                    .map(|(i, &v)| match v {
+                        0.0 => Ok(0),
+                        1.0 => Ok(1),
+                        _ => Err(bad(
+                            path,
+                            &format!("blob dynamic: element {i} is {v}; expected 0 or 1"),
+                        )),
+                    })
+                    .collect::<Result<Vec<u32>>>()?,
+            ),
+        };
         if let Some(k) = m.keys().next() {
             return Err(bad(path, &format!("unexpected blob {k}")));
         }
@@ -322,6 +351,7 @@ impl Checkpoint {
                 mlp_params,
                 mlp_m,
                 mlp_v,
+                dynamic,
             },
             densify_stats,
         })

@@ -86,6 +86,22 @@ pub struct TrainArgs {
     /// scene's ground-truth flow; an ablation isolating the estimator) [default: tvl1].
     #[arg(long, value_enum)]
     pub motion_flow: Option<super::config::MotionFlow>,
+    /// Deformation network: on (Deformable-3DGS) or off (static 3D-GS, the paper's "3DGS"
+    /// rows; needs --motion-weight 0) [default: on].
+    #[arg(long, value_enum)]
+    pub deform: Option<super::config::DeformMode>,
+    /// Split the Gaussians into dynamic and static ones and run the MLP over the dynamic ones
+    /// only (auto), or run it over every Gaussian (off) [default: auto].
+    #[arg(long, value_enum)]
+    pub sparsity: Option<super::config::SparsityMode>,
+    /// Largest motion, in pixels of the training view where it looks largest, that the
+    /// deformation may give a Gaussian treated as static [default: 0.5].
+    #[arg(long)]
+    pub sparsity_threshold: Option<f32>,
+    /// Re-split (after a dense window) every this fraction of the deformation's iterations
+    /// [default: 0.25].
+    #[arg(long)]
+    pub probe_every: Option<f32>,
     /// Print a per-kernel GPU time breakdown at every log line.
     #[arg(short, long)]
     pub verbose: bool,
@@ -117,6 +133,13 @@ pub struct LogLine {
     pub motion_weight: f32,
     /// GPU milliseconds of the step (only with --verbose, else wall milliseconds).
     pub ms: f64,
+    /// Fraction of the Gaussians the deformation runs over (1 while dense).
+    #[serde(default = "one")]
+    pub dynamic_fraction: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// Where the built-in scene is cached: `$XDG_CACHE_HOME` or `~/.cache`, else `./.cache`.
@@ -180,6 +203,13 @@ pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
     c.motion_order = a.motion_order.unwrap_or(c.motion_order);
     c.motion_norm_grad = a.motion_norm_grad.unwrap_or(c.motion_norm_grad);
     c.motion_flow = a.motion_flow.unwrap_or(c.motion_flow);
+    c.deform = a.deform.unwrap_or(c.deform);
+    if c.deform == super::config::DeformMode::Off && a.motion_weight.is_none() {
+        c.motion_weight = 0.0; // a static model has no motion term; --deform off says so
+    }
+    c.sparsity.mode = a.sparsity.unwrap_or(c.sparsity.mode);
+    c.sparsity.threshold_px = a.sparsity_threshold.unwrap_or(c.sparsity.threshold_px);
+    c.sparsity.every = a.probe_every.unwrap_or(c.sparsity.every);
     c.validate()?;
     Ok(c)
 }
@@ -284,6 +314,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     pb.set_position(tr.iteration as u64);
     let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let mut step_ms = Vec::new();
+    let mut dyn_sum = (0.0, 0u32); // mean dynamic fraction over the steps the MLP ran in
     let mut log_file = std::fs::OpenOptions::new()
         .append(true)
         .open(&log_path)
@@ -293,6 +324,9 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         let t0 = Instant::now();
         let info = tr.step(log, log && a.verbose)?;
         step_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        if tr.plan(tr.iteration).deform_active {
+            dyn_sum = (dyn_sum.0 + tr.dynamic_fraction(), dyn_sum.1 + 1);
+        }
         pb.set_position(tr.iteration as u64);
         if let Some(l) = info {
             if !l.loss.loss.is_finite() {
@@ -301,9 +335,13 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
                     l.iteration, l.loss
                 )));
             }
+            let dynamic = tr.dynamic_fraction();
             let msg = format!(
-                "loss {:.4} psnr {:.2} gaussians {}",
-                l.loss.loss, l.loss.psnr, l.num_gaussians
+                "loss {:.4} psnr {:.2} gaussians {} dynamic {:.0}%",
+                l.loss.loss,
+                l.loss.psnr,
+                l.num_gaussians,
+                100.0 * dynamic
             );
             pb.set_message(msg.clone());
             let line = LogLine {
@@ -317,6 +355,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
                 } else {
                     *step_ms.last().expect("timed")
                 },
+                dynamic_fraction: dynamic,
             };
             let text = serde_json::to_string(&line).expect("log line serialises");
             std::io::Write::write_all(&mut log_file, format!("{text}\n").as_bytes())
@@ -363,6 +402,15 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     write_ply(&out.join("point_cloud.ply"), &tr.gaussians()?)?;
     let mlp = tr.model.deform.download(&gpu)?;
     write_atomic(&out.join("deform.bin"), bytemuck::cast_slice(&mlp))?;
+    let dynamic_bin = out.join("dynamic.bin");
+    match tr.model.dynamic.download(&gpu, tr.n())? {
+        // One byte per Gaussian of point_cloud.ply, 1 = dynamic; absent = all dynamic.
+        Some(f) => write_atomic(&dynamic_bin, &f.iter().map(|&v| v as u8).collect::<Vec<u8>>())?,
+        None if dynamic_bin.is_file() => {
+            std::fs::remove_file(&dynamic_bin).map_err(io(&dynamic_bin))?
+        }
+        None => {}
+    }
     let ctx = ReportContext {
         run: out.display().to_string(),
         scene: name,
@@ -375,6 +423,8 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     metrics.initial_psnr = initial_psnr;
     // None when no step ran (a resumed run that had already finished).
     metrics.ms_per_step = (!step_ms.is_empty()).then(|| crate::bench::median(step_ms));
+    metrics.dynamic_fraction = Some(tr.dynamic_fraction());
+    metrics.mean_dynamic_fraction = (dyn_sum.1 > 0).then(|| dyn_sum.0 / dyn_sum.1 as f64);
     write_atomic(&out.join("metrics.json"), metrics.to_json().as_bytes())?;
     let fmt = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.4}"));
     println!(

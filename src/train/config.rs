@@ -137,6 +137,67 @@ pub struct TrainConfig {
     /// the estimator's quality).
     #[serde(default)]
     pub motion_flow: MotionFlow,
+    /// The deformation network: on (Deformable-3DGS) or off (static 3D-GS, the paper's
+    /// "3DGS" rows; no MLP is ever run).
+    #[serde(default)]
+    pub deform: DeformMode,
+    /// Run the MLP over the dynamic Gaussians only (see [`SparsityConfig`]).
+    #[serde(default)]
+    pub sparsity: SparsityConfig,
+}
+
+/// Whether the scene is modelled with a deformation at all.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DeformMode {
+    #[default]
+    On,
+    /// Static 3D-GS: D ≡ 0 for the whole run.
+    Off,
+}
+
+/// Whether the Gaussians are split into dynamic and static ones.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SparsityMode {
+    /// Every Gaussian through the MLP at every step (Deformable-3DGS).
+    Off,
+    /// Probe the deformation and run the MLP over the dynamic Gaussians only.
+    #[default]
+    Auto,
+}
+
+/// The dynamic/static split's schedule and threshold. Times are fractions of the
+/// deformation's iterations (`iterations − warm_up`), so `--iterations` alone keeps the
+/// schedule coherent. The first split comes at `start`; then every `every` the model is dense
+/// again for the last `dense_window` (a fraction of `every`) iterations before it is split
+/// anew (a static Gaussian whose region started to move gets MLP gradients there and is
+/// found again), and right after each densification (children are probed, never guessed).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SparsityConfig {
+    pub mode: SparsityMode,
+    /// Largest motion D may give a static Gaussian, in pixels of the training view where it
+    /// looks largest, at any probed time.
+    pub threshold_px: f32,
+    /// Times D is probed at (evenly over the training frames' time range).
+    pub probe_times: u32,
+    pub start: f32,
+    pub every: f32,
+    pub dense_window: f32,
+}
+
+impl Default for SparsityConfig {
+    fn default() -> Self {
+        SparsityConfig {
+            mode: SparsityMode::Auto,
+            threshold_px: 0.5,
+            probe_times: 8,
+            start: 0.25,
+            every: 0.25,
+            dense_window: 0.2,
+        }
+    }
 }
 
 /// Where the motion step's scene motion comes from.
@@ -224,6 +285,8 @@ impl TrainConfig {
             motion_order: MotionOrder::Direct,
             motion_norm_grad: NormGrad::Detached,
             motion_flow: MotionFlow::Tvl1,
+            deform: DeformMode::On,
+            sparsity: SparsityConfig::default(),
         }
     }
 
@@ -411,6 +474,21 @@ impl TrainConfig {
                 "\"oracle\" with motion_order = \"reverse\"",
                 "motion_order = \"direct\" (the oracle gives the flow under the frame's own view)",
             )?;
+        }
+        if self.deform == DeformMode::Off && self.motion_weight > 0.0 {
+            bad(
+                "motion_weight",
+                self.motion_weight,
+                "0 with deform = \"off\" (a static scene has no displacement flow)",
+            )?;
+        }
+        let sp = &self.sparsity;
+        non_negative("sparsity.threshold_px", sp.threshold_px as f64)?;
+        at_least_1("sparsity.probe_times", sp.probe_times)?;
+        unit("sparsity.start", sp.start as f64)?;
+        unit("sparsity.dense_window", sp.dense_window as f64)?;
+        if !(sp.every.is_finite() && sp.every > 0.0 && sp.every <= 1.0) {
+            bad("sparsity.every", sp.every, "a value in (0, 1]")?;
         }
         Ok(())
     }

@@ -21,13 +21,15 @@ use crate::kernels::flow::FlowConfig;
 use crate::kernels::loss::LossValues;
 use crate::kernels::motion::NormConfig;
 use crate::kernels::raster::{Camera, Rasterizer};
+use crate::model::dynamic::DynamicSet;
 use crate::model::gaussians::HostGaussians;
 use crate::model::state::{mlp_config_for, DeformState, GaussianState, Model};
 use crate::vk::{Gpu, Recorder, Timings};
 use checkpoint::Checkpoint;
-use config::{MotionFlow, MotionOrder, NormGrad, TrainConfig};
+use config::{DeformMode, MotionFlow, MotionOrder, NormGrad, SparsityMode, TrainConfig};
 use frames::GpuFrame;
 use passes::motion::{OpticalFlow, OracleFlow};
+use passes::sparsity::{Classifier, ProbeConfig};
 use passes::{
     AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass,
     SceneMotion, StepSizes,
@@ -95,6 +97,7 @@ impl<'g> Trainer<'g> {
                 cfg.seed,
                 cfg.zero_deform_head,
             )?,
+            dynamic: DynamicSet::new(gpu, budget)?,
         };
         let sizes = StepSizes {
             capacity: budget,
@@ -139,6 +142,7 @@ impl<'g> Trainer<'g> {
                 &self.sizes,
                 &self.times,
                 &self.raster,
+                &self.frames,
             )?);
         }
         Ok(self.passes.as_mut().expect("just built"))
@@ -171,6 +175,9 @@ impl<'g> Trainer<'g> {
                 Recorder::new(self.gpu)?
             };
             self.passes()?;
+            if !p.sparse {
+                self.model.dynamic.set_dense();
+            }
             let (m, s) = (&self.model, self.passes.as_mut().expect("built"));
             step::record_step(&mut rec, &p, m, s, &self.frames, self.cfg.lambda_ssim);
             let timings = rec.finish()?;
@@ -196,6 +203,9 @@ impl<'g> Trainer<'g> {
             }
             self.iteration = p.iteration;
             self.densify_if_due(&p)?;
+            if p.classify {
+                self.classify()?;
+            }
             return Ok(if want_values {
                 Some(StepLog {
                     iteration: p.iteration,
@@ -219,6 +229,23 @@ impl<'g> Trainer<'g> {
             d.reset_opacity(self.gpu, &self.model.gaussians)?;
         }
         Ok(())
+    }
+
+    /// Splits the model into dynamic and static Gaussians now (the motion probe); returns the
+    /// dynamic count. A no-op returning the live count without a probe (sparsity off or the
+    /// deformation off).
+    pub fn classify(&mut self) -> Result<u32> {
+        self.passes()?;
+        let s = self.passes.as_ref().expect("built");
+        match &s.classifier {
+            Some(c) => c.classify(self.gpu, &mut self.model, &s.deform),
+            None => Ok(self.n()),
+        }
+    }
+
+    /// Fraction of the live Gaussians the deformation runs over (1 while dense).
+    pub fn dynamic_fraction(&self) -> f64 {
+        self.model.dynamic.fraction(self.n())
     }
 
     /// How the model is drawn now: the deformation and SH degree of the last iteration.
@@ -355,6 +382,7 @@ fn build_passes(
     sizes: &StepSizes,
     times: &FrameTimes,
     raster: &Rc<Rasterizer>,
+    frames: &[GpuFrame],
 ) -> Result<StepPasses> {
     let motion_on = cfg.motion_weight > 0.0;
     let roles = Decomposition::of(cfg.motion_order);
@@ -397,7 +425,27 @@ fn build_passes(
         adam: AdamPass::new(gpu)?,
         densify: DensifyPass::new(gpu, cfg.densify, times.extent, cfg.seed)?,
         watch: OverflowWatch::new(gpu, "step overflow flags", 2)?,
+        classifier: classifier(gpu, cfg, sizes, times, frames)?,
     })
+}
+
+/// The motion probe when the configuration splits the model.
+fn classifier(
+    gpu: &Gpu,
+    cfg: &TrainConfig,
+    sizes: &StepSizes,
+    times: &FrameTimes,
+    frames: &[GpuFrame],
+) -> Result<Option<Classifier>> {
+    let sp = &cfg.sparsity;
+    if sp.mode == SparsityMode::Off || cfg.deform == DeformMode::Off || frames.is_empty() {
+        return Ok(None);
+    }
+    let lo = times.times.iter().copied().fold(f32::INFINITY, f32::min);
+    let hi = times.times.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    let probe = ProbeConfig::even(sp.threshold_px, sp.probe_times, lo, hi);
+    let cams: Vec<Camera> = frames.iter().map(|f| f.camera).collect();
+    Classifier::new(gpu, sizes.capacity, &cams, probe).map(Some)
 }
 
 /// The initial Gaussians from the dataset's points, evenly subsampled to the budget.

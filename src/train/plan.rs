@@ -5,7 +5,7 @@
 //! Every choice is hashed from (seed, iteration), never drawn from a running generator, so a
 //! resumed run makes exactly the choices of an uninterrupted one.
 
-use super::config::{Background, MotionOrder, TimeNoise, TrainConfig};
+use super::config::{Background, DeformMode, MotionOrder, SparsityMode, TimeNoise, TrainConfig};
 use crate::model::optim::ExpLr;
 
 /// Facts about the training frames the schedule needs: their times, time order, camera extent.
@@ -132,13 +132,17 @@ pub struct StepPlan {
     pub densify: Option<bool>,
     /// Opacity reset after the step.
     pub opacity_reset: bool,
+    /// The step runs the MLP over the dynamic Gaussians of the model's split (else over all).
+    pub sparse: bool,
+    /// The model is split anew after the step (and after its densification).
+    pub classify: bool,
 }
 
 impl StepPlan {
     pub fn at(cfg: &TrainConfig, frames: &FrameTimes, iteration: u32) -> StepPlan {
         let it = iteration.max(1);
         let frame = frame_for_iteration(cfg.seed, it, frames.times.len());
-        let deform_active = it > cfg.warm_up;
+        let deform_active = deform_on(cfg, it);
         let mut t1 = frames.times[frame];
         if frames.time_noise && deform_active {
             // Deformable-3DGS AST: N(0,1) · (1 / frames) · a decaying factor.
@@ -174,6 +178,9 @@ impl StepPlan {
             }
         });
         let d = &cfg.densify;
+        let densify = (it <= d.until && it > d.from && it % d.interval == 0)
+            .then_some(it > d.opacity_reset_interval);
+        let (sparse, split_due) = sparsity_at(cfg, it);
         StepPlan {
             iteration: it,
             frame,
@@ -184,11 +191,39 @@ impl StepPlan {
             motion,
             lr: learning_rates(cfg, frames.extent, it),
             densify_stats: it <= d.until,
-            densify: (it <= d.until && it > d.from && it % d.interval == 0)
-                .then_some(it > d.opacity_reset_interval),
+            densify,
             opacity_reset: it <= d.until && it % d.opacity_reset_interval == 0,
+            sparse,
+            // Densification renumbers the Gaussians: a split model is probed again at once.
+            classify: split_due || (sparse && densify.is_some()),
         }
     }
+}
+
+/// The deformation network runs at 1-based iteration `it` (after the warm-up, unless off).
+fn deform_on(cfg: &TrainConfig, it: u32) -> bool {
+    cfg.deform == DeformMode::On && it > cfg.warm_up
+}
+
+/// The split's schedule at 1-based `it`: (the step uses the split, a split is due after it).
+/// Dense until the first split after step `s0`; then period `P`: steps `s0 + kP − W + 1 ..=
+/// s0 + kP` are dense (the window a static Gaussian can start moving in) and the model is
+/// split again after step `s0 + kP`.
+pub fn sparsity_at(cfg: &TrainConfig, it: u32) -> (bool, bool) {
+    let sp = &cfg.sparsity;
+    if sp.mode == SparsityMode::Off || !deform_on(cfg, it) {
+        return (false, false);
+    }
+    let span = cfg.iterations.saturating_sub(cfg.warm_up).max(1) as f32;
+    let s0 = cfg.warm_up + ((sp.start * span).round() as u32).max(1);
+    let period = ((sp.every * span).round() as u32).max(1);
+    let window = ((sp.dense_window * period as f32).round() as u32).min(period);
+    if it < s0 {
+        return (false, false);
+    }
+    let phase = (it - s0) % period;
+    let dense = it == s0 || (window > 0 && (phase == 0 || phase > period - window));
+    (!dense, phase == 0)
 }
 
 /// α_t of the motion term at 1-based `iteration`: 0 before `motion_start` (or during the
@@ -229,7 +264,7 @@ fn learning_rates(cfg: &TrainConfig, extent: f32, it: u32) -> StepLr {
         opacity: lr.opacity,
         sh_dc: lr.feature,
         sh_rest: lr.feature / lr.feature_rest_div,
-        deform: (it > cfg.warm_up).then(|| (deform.at(it as i64), it - cfg.warm_up)),
+        deform: deform_on(cfg, it).then(|| (deform.at(it as i64), it - cfg.warm_up)),
     }
 }
 
@@ -378,6 +413,44 @@ mod tests {
         assert!(d.photo_splats && d.inter_at_t2 && !d.inter_at_pair_view && d.flow_from_photo);
         let r = Decomposition::of(MotionOrder::Reverse);
         assert!(!r.photo_splats && !r.inter_at_t2 && r.inter_at_pair_view && !r.flow_from_photo);
+    }
+
+    #[test]
+    fn sparsity_schedule_is_fractions_of_the_deformation_run() {
+        let (mut c, f) = (cfg(), frames());
+        // warm-up 20 of 100: span 80, first split after 20 + 20 = 40, period 20, window 4.
+        c.densify.until = 0;
+        let at = |c: &TrainConfig, it| sparsity_at(c, it);
+        assert_eq!(at(&c, 20), (false, false), "warm-up: no MLP, no split");
+        assert_eq!(at(&c, 39), (false, false));
+        assert_eq!(at(&c, 40), (false, true), "first split after step 40");
+        assert_eq!(at(&c, 41), (true, false));
+        assert_eq!(at(&c, 56), (true, false));
+        for it in 57..=60 {
+            assert!(!at(&c, it).0, "dense window before the re-split: {it}");
+        }
+        assert_eq!(at(&c, 60), (false, true));
+        assert_eq!(at(&c, 61), (true, false));
+        c.sparsity.mode = SparsityMode::Off;
+        assert!((1..=100).all(|it| at(&c, it) == (false, false)));
+        let mut d = cfg();
+        d.deform = DeformMode::Off;
+        d.motion_weight = 0.0;
+        assert!((1..=100).all(|it| at(&d, it) == (false, false)));
+        assert!((1..=100).all(|it| !StepPlan::at(&d, &f, it).deform_active));
+        assert!((1..=100).all(|it| StepPlan::at(&d, &f, it).lr.deform.is_none()));
+        // A densification inside a sparse stretch re-splits at once.
+        let mut e = cfg();
+        e.densify.from = 0;
+        e.densify.until = 100;
+        e.densify.interval = 50;
+        let p = StepPlan::at(&e, &f, 50);
+        assert!(p.sparse && p.densify.is_some() && p.classify);
+        // Twice the iterations: the same schedule in proportion.
+        let mut g = c.clone();
+        g.sparsity.mode = SparsityMode::Auto;
+        g.iterations = 180;
+        assert_eq!(at(&g, 60), (false, true), "20 + 0.25 · 160");
     }
 
     #[test]

@@ -5,6 +5,7 @@ use super::frames::GpuFrame;
 use super::passes::{
     AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass, Slot,
 };
+use super::passes::sparsity::Classifier;
 use super::plan::StepPlan;
 use crate::kernels::raster::{OutputGrads, RenderOpts, SplatInputs};
 use crate::model::state::Model;
@@ -24,6 +25,8 @@ pub struct StepPasses {
     pub densify: DensifyPass,
     /// Overflow of the render (slot 0) and of the intermediate render (slot 1).
     pub watch: OverflowWatch,
+    /// The motion probe that splits the model (sparsity on, deformation on).
+    pub classifier: Option<Classifier>,
 }
 
 impl StepPasses {

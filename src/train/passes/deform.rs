@@ -1,10 +1,17 @@
 //! The deformation pass: D(x, t) by the MLP and its composition with the canonical Gaussians,
 //! forward and backward, over one or more time slots (a DispFlow step evaluates D at t1 and t2).
+//!
+//! When the model is split into dynamic and static Gaussians (`model.dynamic`), the MLP runs
+//! over the dynamic rows only: their means are gathered into a compact batch, the MLP's
+//! compact output is expanded back into Gaussian order with exact zeros for the static ones
+//! (so the composition, δ and everything downstream are unchanged), and the backward gathers
+//! the output gradients of the same rows. The dense path is the code that ran before.
 
 use super::{row, StepSizes};
 use crate::error::Result;
 use crate::kernels::deform::{DeformApply, Drawn};
 use crate::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
+use crate::kernels::sparse::SparseKernels;
 use crate::model::deform::MlpConfig;
 use crate::model::gaussians::Section;
 use crate::model::state::Model;
@@ -25,11 +32,17 @@ struct SlotBuffers {
     out: Buffer,
     d_out: Option<Buffer>,
     drawn: [Buffer; 3],
+    /// The MLP's output and output gradient over the dynamic rows only (split model).
+    compact_out: Buffer,
+    compact_d_out: Option<Buffer>,
 }
 
 pub struct DeformPass {
     mlp: Mlp,
     apply: DeformApply,
+    rows: SparseKernels,
+    /// The dynamic Gaussians' canonical means, gathered (split model).
+    compact_means: Buffer,
     slots: Vec<SlotBuffers>,
 }
 
@@ -59,12 +72,18 @@ impl DeformPass {
                         rows("drawn scales", row::VEC3)?,
                         rows("drawn quats", row::QUAT)?,
                     ],
+                    compact_out: rows("dynamic deformation", row::DEFORM)?,
+                    compact_d_out: backward
+                        .then(|| rows("dynamic deformation grads", row::DEFORM))
+                        .transpose()?,
                 })
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(DeformPass {
             mlp,
             apply: DeformApply::new(gpu)?,
+            rows: SparseKernels::new(gpu)?,
+            compact_means: gpu.buffer("dynamic means", cap * row::VEC3 * 4)?,
             slots,
         })
     }
@@ -88,20 +107,27 @@ impl DeformPass {
         self.slot(k).d_out.as_ref().expect("a backward pass").all()
     }
 
-    /// D(·, t) by the MLP into slot `k` (the MLP sees the canonical means, detached).
+    /// D(·, t) by the MLP into slot `k` (the MLP sees the canonical means, detached): over
+    /// the dynamic rows when the model is split (zeros for the static ones), else over all.
     pub fn mlp_forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32) {
-        let (g, s) = (&model.gaussians, self.slot(k));
+        let (g, s, dynamic) = (&model.gaussians, self.slot(k), &model.dynamic);
         let means = g.param(Section::Means);
         let params = model.deform.params.all();
-        self.mlp.forward(
-            rec,
-            &s.mlp,
-            g.n,
-            means,
-            MlpTime::Batch(t),
-            params,
-            s.out.all(),
-        );
+        let Some(count) = dynamic.split() else {
+            let time = MlpTime::Batch(t);
+            self.mlp
+                .forward(rec, &s.mlp, g.n, means, time, params, s.out.all());
+            return;
+        };
+        if count > 0 {
+            let xyz = self.compact_means.all();
+            self.rows.gather(rec, count, 3, dynamic.idx(), means, xyz);
+            let time = MlpTime::Batch(t);
+            let out = s.compact_out.all();
+            self.mlp.forward(rec, &s.mlp, count, xyz, time, params, out);
+        }
+        let (row_of, out) = (dynamic.row_of(), s.compact_out.all());
+        self.rows.expand(rec, g.n, 10, row_of, out, s.out.all());
     }
 
     /// Composes the canonical Gaussians with slot `k`'s MLP output (`deformed`) or with D ≡ 0.
@@ -138,18 +164,28 @@ impl DeformPass {
     }
 
     /// The MLP's weight gradients from slot `k`'s output gradient, written into the model's
-    /// MLP gradient buffer or added to it (`accumulate`).
+    /// MLP gradient buffer or added to it (`accumulate`); over the dynamic rows when split.
     pub fn mlp_backward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, accumulate: bool) {
-        let (d, s) = (&model.deform, self.slot(k));
-        self.mlp.backward(
-            rec,
-            &s.mlp,
-            model.gaussians.n,
-            d.params.all(),
-            self.output_grad(k),
-            d.grads.all(),
-            accumulate,
-        );
+        let (d, s, dynamic) = (&model.deform, self.slot(k), &model.dynamic);
+        let (params, grads) = (d.params.all(), d.grads.all());
+        let (rows, d_out) = match dynamic.split() {
+            None => (model.gaussians.n, self.output_grad(k)),
+            Some(0) => {
+                // Nothing is dynamic: the MLP had no input, its gradient is zero.
+                if !accumulate {
+                    rec.fill(grads, 0);
+                }
+                return;
+            }
+            Some(count) => {
+                let c = s.compact_d_out.as_ref().expect("a backward pass").all();
+                let src = self.output_grad(k);
+                self.rows.gather(rec, count, 10, dynamic.idx(), src, c);
+                (count, c)
+            }
+        };
+        self.mlp
+            .backward(rec, &s.mlp, rows, params, d_out, grads, accumulate);
     }
 }
 

@@ -6,6 +6,7 @@ pub mod deform;
 pub mod motion;
 pub mod optim;
 pub mod render;
+pub mod sparsity;
 
 pub use deform::{DeformPass, Slot};
 pub use motion::{MotionPair, MotionTerm, SceneMotion};
