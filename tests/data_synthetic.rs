@@ -4,7 +4,7 @@ mod data_util;
 
 use std::path::Path;
 
-use dispflow_vk::data::synthetic::{self, GenCamera, Preset, Scene};
+use dispflow_vk::data::synthetic::{self, GenCamera, Preset, Scene, SceneMotion};
 use dispflow_vk::data::{self, check, PointSource};
 use glam::DVec3;
 
@@ -211,4 +211,135 @@ fn rigid_motion_is_rigid_and_blob_deforms() {
     assert!((moved[0] - p[0]).length() > 0.1);
     let u = DVec3::new(0.0, 1.0, 0.0);
     assert!((Scene::blob_radius(u, 0.0) - Scene::blob_radius(u, 0.1)).abs() > 1e-3);
+}
+
+/// Sums of a rendered view: `(Σ rgb, Σ flow, Σ |flow|, moving pixels)`.
+fn view_sums(r: &synthetic::Rendered) -> (f64, f64, f64, usize) {
+    let sum = |v: &[f32]| v.iter().map(|&x| x as f64).sum::<f64>();
+    let abs = r.flow.iter().map(|&x| x.abs() as f64).sum::<f64>();
+    let moving = r.mask.iter().filter(|&&v| v == 1).count();
+    (sum(&r.rgb), sum(&r.flow), abs, moving)
+}
+
+/// The default (moving) scene is the one generated before motion kinds existed: a view's sums and
+/// pixels match values recorded from that generator, and `generate` writes the same files as
+/// `generate_with(.., Moving, ..)`.
+#[test]
+fn moving_kind_is_unchanged() {
+    let cam = GenCamera::for_frame(10, 24, 48, 40);
+    let r = synthetic::render_view(&Scene::new(5), &cam, 0.4, 0.45);
+    let (rgb, flow, abs, moving) = view_sums(&r);
+    // Recorded with the generator at 37bb229 (before SceneMotion).
+    assert_eq!(moving, 229);
+    assert!((rgb - 2_003.011_66).abs() < 1e-4, "{rgb}");
+    assert!((flow - 266.630_63).abs() < 1e-4, "{flow}");
+    assert!((abs - 292.848_14).abs() < 1e-4, "{abs}");
+    assert_eq!(r.mask[900], 1);
+    assert!(
+        (r.flow[1800] - 0.123_102_315).abs() < 1e-6
+            && (r.flow[1801] - 0.007_803_893_6).abs() < 1e-6
+    );
+    assert!((r.rgb[2100] - 0.411_280_6).abs() < 1e-6 && (r.rgb[3600] - 0.086_151_51).abs() < 1e-6);
+    let m = synthetic::render_view(&Scene::with_motion(5, SceneMotion::Moving), &cam, 0.4, 0.45);
+    assert!(m.rgb == r.rgb && m.mask == r.mask && m.flow == r.flow);
+
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    let s = synthetic::generate(Preset::Tiny, 5, &a).unwrap();
+    assert_eq!(s.motion, SceneMotion::Moving);
+    synthetic::generate_with(Preset::Tiny, 5, SceneMotion::Moving, &b).unwrap();
+    let fa = files(&a);
+    assert_eq!(fa, files(&b));
+    for f in &fa {
+        assert_eq!(
+            std::fs::read(a.join(f)).unwrap(),
+            std::fs::read(b.join(f)).unwrap(),
+            "{f:?}"
+        );
+    }
+}
+
+fn motion_recorded(dir: &Path) -> String {
+    let j: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("synthetic.json")).unwrap()).unwrap();
+    j["motion"].as_str().unwrap().to_string()
+}
+
+/// Renders from one fixed camera at `t0` and `t1` (flow towards `t + 0.05`).
+fn fixed_view_pair(scene: &Scene, t0: f64, t1: f64) -> (synthetic::Rendered, synthetic::Rendered) {
+    let cam = GenCamera::for_frame(7, 24, 48, 40);
+    (
+        synthetic::render_view(scene, &cam, t0, t0 + 0.05),
+        synthetic::render_view(scene, &cam, t1, t1 + 0.05),
+    )
+}
+
+#[test]
+fn static_kind_has_no_motion_but_a_moving_camera() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (st, mv) = (tmp.path().join("static"), tmp.path().join("moving"));
+    let s = synthetic::generate_with(Preset::Tiny, 6, SceneMotion::Static, &st).unwrap();
+    assert_eq!(s.motion, SceneMotion::Static);
+    assert_eq!(motion_recorded(&st), "static");
+    synthetic::generate(Preset::Tiny, 6, &mv).unwrap();
+    let ds = data::load(&st, &data_util::opts()).unwrap();
+    assert_eq!(ds.frames().count(), 24);
+    for f in ds.frames() {
+        assert!(f.mask.as_ref().unwrap().iter().all(|&v| v == 0), "{}", f.id);
+        assert!(
+            f.flow.as_ref().unwrap().iter().all(|&v| v == 0.0),
+            "{}",
+            f.id
+        );
+    }
+    // The camera arc is the moving scene's; the first frame (t = 0) is identical.
+    for f in ["camera/000010.json", "rgb/1x/000000.png", "points.npy"] {
+        assert_eq!(
+            std::fs::read(st.join(f)).unwrap(),
+            std::fs::read(mv.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    let read = |f: &str| std::fs::read(st.join(f)).unwrap();
+    assert_ne!(read("rgb/1x/000000.png"), read("rgb/1x/000020.png"));
+    // From a fixed camera, every time looks like t = 0.
+    let scene = Scene::with_motion(6, SceneMotion::Static);
+    let (a, b) = fixed_view_pair(&scene, 0.1, 0.8);
+    assert!(a.rgb == b.rgb && a.mask.iter().chain(&b.mask).all(|&v| v == 0));
+    assert!(a.flow.iter().chain(&b.flow).all(|&v| v == 0.0));
+    let (z, _) = fixed_view_pair(&Scene::new(6), 0.0, 0.0);
+    assert_eq!(a.rgb, z.rgb);
+}
+
+#[test]
+fn late_kind_rests_then_moves() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = synthetic::generate_with(Preset::Tiny, 6, SceneMotion::Late, tmp.path()).unwrap();
+    assert_eq!(s.motion, SceneMotion::Late);
+    assert_eq!(motion_recorded(tmp.path()), "late");
+    let ds = data::load(tmp.path(), &data_util::opts()).unwrap();
+    for f in ds.frames() {
+        let k: usize = f.id.parse().unwrap();
+        let (m, flow) = (f.mask.as_ref().unwrap(), f.flow.as_ref().unwrap());
+        let moving = m.iter().filter(|&&v| v == 1).count();
+        let nonzero = flow.iter().filter(|&&v| v != 0.0).count();
+        // t_{k+1} = (k+1)/23 ≤ 0.5 up to k = 10; frame 11 starts the motion towards t_12.
+        if k <= 10 {
+            assert_eq!((moving, nonzero), (0, 0), "frame {k}");
+        } else {
+            assert!(
+                moving > 64 && nonzero > moving,
+                "frame {k}: {moving} moving, {nonzero} flow"
+            );
+        }
+    }
+    let scene = Scene::with_motion(6, SceneMotion::Late);
+    let (a, b) = fixed_view_pair(&scene, 0.1, 0.4);
+    assert!(a.rgb == b.rgb && a.mask.iter().chain(&b.mask).all(|&v| v == 0));
+    assert!(a.flow.iter().chain(&b.flow).all(|&v| v == 0.0));
+    // The second half replays the moving trajectory at double speed: late t = 0.75 is moving 0.5.
+    let (c, d) = fixed_view_pair(&scene, 0.6, 0.75);
+    assert!(c.rgb != d.rgb && c.mask.contains(&1) && d.mask.contains(&1));
+    let (e, _) = fixed_view_pair(&Scene::new(6), 0.5, 0.5);
+    assert_eq!(d.rgb, e.rgb);
 }

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use super::points::PointsPreference;
-use super::synthetic::{self, Preset};
+use super::synthetic::{self, Preset, SceneMotion};
 use super::LoadOptions;
 
 /// Generate or check datasets.
@@ -28,6 +28,11 @@ pub enum DataCommand {
         /// Random seed (textures, colours, points); the same seed gives identical files.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// How the objects move (the camera arc is the same in every kind): moving = throughout
+        /// the sequence; static = frozen at their t = 0 pose, masks and flow all zero; late = at
+        /// rest for the first half, then their whole trajectory in the second half.
+        #[arg(long, value_enum, default_value_t = SceneMotion::Moving)]
+        motion: SceneMotion,
     },
     /// Load a dataset (nerfies or D-NeRF/blender), validate every file and print a report:
     /// frames per split, time range, resolution, camera spread, masks, points, warnings.
@@ -50,15 +55,21 @@ pub enum DataCommand {
 /// Runs `dispflow-vk data ...`.
 pub fn run(args: &DataArgs) -> crate::Result<()> {
     match &args.command {
-        DataCommand::Gen { out, preset, seed } => {
+        DataCommand::Gen {
+            out,
+            preset,
+            seed,
+            motion,
+        } => {
             let t0 = std::time::Instant::now();
-            let s = synthetic::generate(*preset, *seed, out)?;
+            let s = synthetic::generate_with(*preset, *seed, *motion, out)?;
             println!(
-                "wrote {} ({} preset, seed {}): {} frames {}×{} (train {}, val {}), {} points, \
-                 masks and scene flow, in {:.1} s",
+                "wrote {} ({} preset, seed {}, motion {}): {} frames {}×{} (train {}, val {}), \
+                 {} points, masks and scene flow, in {:.1} s",
                 s.dir.display(),
                 s.preset.name(),
                 s.seed,
+                s.motion.name(),
                 s.frames,
                 s.width,
                 s.height,

@@ -10,20 +10,28 @@
 //!   keeps its direction `u` from the blob centre (its material coordinate) and moves radially.
 //!
 //! A monocular camera moves slowly along an arc while time advances (frame `k` at
-//! `t_k = k/(N−1)`). Outputs, next to the nerfies files:
-//! - `mask/1x/<id>.png.png`: 255 where the pixel sees a moving object (rigid sphere or blob);
-//! - `flow/<id>.npy`: `H×W×2` f32, for each pixel seeing an object, the projection **by the same
-//!   camera `v_k`** of that surface point at `t_{k+1}` minus its projection at `t_k` (scene motion
-//!   without camera motion; occlusion at `t_{k+1}` is ignored; the last frame extrapolates to
-//!   `t_N`), zero on the static room;
-//! - `points.npy`: points sampled on the surfaces at `t = 0` with ±0.01 uniform noise (raw units);
-//! - `synthetic.json`: preset, seed and these conventions.
+//! `t_k = k/(N−1)`). The objects are posed at the scene time `motion.warp(t_k)` of the motion
+//! kind ([`SceneMotion`]): `moving` (scene time = frame time, the default), `static` (frozen at
+//! their `t = 0` pose) or `late` (at rest for the first half, then their whole trajectory in the
+//! second half); the camera arc is the same in every kind. Outputs, next to the nerfies files:
+//! - `mask/1x/<id>.png.png`: 255 where the pixel sees an object (rigid sphere or blob) that moves
+//!   between `t_k` and `t_{k+1}` (its warped time changes), so all zero in the `static` kind;
+//! - `flow/<id>.npy`: `H×W×2` f32, for each of those pixels, the projection **by the same camera
+//!   `v_k`** of that surface point at `warp(t_{k+1})` minus its projection at `warp(t_k)` (scene
+//!   motion without camera motion; occlusion at `t_{k+1}` is ignored; the last frame extrapolates
+//!   to `t_N`), exactly zero wherever the mask is;
+//! - `points.npy`: points sampled on the surfaces at `t = 0` with ±0.01 uniform noise (raw units;
+//!   the same in every kind, since `warp(0) = 0`);
+//! - `synthetic.json`: preset, seed, motion kind and these conventions.
 //!
 //! Cameras have zero distortion and a slightly off-centre principal point; `scene.json`
 //! normalises with a non-trivial centre and scale. Everything is deterministic by seed.
 //!
 //! Over 600 lines: the primitives, their motion, the ray caster and the writer of every output
-//! file share one scene description; they split along those lines if the scene grows.
+//! file share one scene description; they split along those lines if the scene grows (the
+//! motion kinds' time warp already lives in `synthetic/motion.rs`).
+
+mod motion;
 
 use std::path::{Path, PathBuf};
 
@@ -33,6 +41,8 @@ use rayon::prelude::*;
 use serde_json::json;
 
 use super::{image as img, points, progress_bar, DataError, DataResult};
+
+pub use motion::SceneMotion;
 
 /// Size presets.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -63,12 +73,13 @@ impl Preset {
     }
 }
 
-/// What [`generate`] wrote.
+/// What [`generate_with`] wrote.
 #[derive(Clone, Debug)]
 pub struct Summary {
     pub dir: PathBuf,
     pub preset: Preset,
     pub seed: u64,
+    pub motion: SceneMotion,
     pub width: u32,
     pub height: u32,
     pub frames: usize,
@@ -85,10 +96,16 @@ const BLOB_R0: f64 = 0.55;
 const BLOB_A: f64 = 0.12;
 const BLOB_B: f64 = 0.06;
 
-/// The analytic scene for one seed.
+/// The analytic scene for one seed and motion kind.
+///
+/// The associated trajectory functions ([`Scene::rigid_centre`], [`Scene::rigid_rotation`],
+/// [`Scene::blob_radius`], [`Scene::advect`]) take *scene* time; the methods ([`Scene::cast`],
+/// [`Scene::shade`], [`render_view`]) take *frame* time and warp it by the scene's
+/// [`SceneMotion`].
 #[derive(Clone, Debug)]
 pub struct Scene {
     seed: u64,
+    motion: SceneMotion,
     wall_colors: [[DVec3; 2]; 6],
     rigid_colors: [DVec3; 2],
     blob_colors: [DVec3; 2],
@@ -103,7 +120,13 @@ pub enum Hit {
 }
 
 impl Scene {
+    /// The moving scene ([`SceneMotion::Moving`]).
     pub fn new(seed: u64) -> Self {
+        Self::with_motion(seed, SceneMotion::Moving)
+    }
+
+    /// The scene with the given motion kind (textures and colours depend on `seed` only).
+    pub fn with_motion(seed: u64, motion: SceneMotion) -> Self {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         let mut col = |lo: f64, hi: f64| {
             DVec3::new(
@@ -118,13 +141,18 @@ impl Scene {
         }
         Scene {
             seed,
+            motion,
             wall_colors,
             rigid_colors: [col(0.7, 1.0), col(0.0, 0.3)],
             blob_colors: [col(0.5, 1.0), col(0.05, 0.4)],
         }
     }
 
-    /// Rigid sphere centre at time `t`.
+    pub fn motion(&self) -> SceneMotion {
+        self.motion
+    }
+
+    /// Rigid sphere centre at scene time `t`.
     pub fn rigid_centre(t: f64) -> DVec3 {
         use std::f64::consts::PI;
         DVec3::new(
@@ -134,7 +162,7 @@ impl Scene {
         )
     }
 
-    /// Rigid sphere rotation (object to world) at time `t`.
+    /// Rigid sphere rotation (object to world) at scene time `t`.
     pub fn rigid_rotation(t: f64) -> DMat3 {
         DMat3::from_axis_angle(
             DVec3::new(0.3, 1.0, 0.2).normalize(),
@@ -142,7 +170,7 @@ impl Scene {
         )
     }
 
-    /// Blob radius along unit direction `u` at time `t`.
+    /// Blob radius along unit direction `u` at scene time `t`.
     pub fn blob_radius(u: DVec3, t: f64) -> f64 {
         use std::f64::consts::PI;
         let phi = u.z.atan2(u.x);
@@ -152,7 +180,7 @@ impl Scene {
                 + BLOB_B * (2.0 * phi + 2.0 * PI * t).sin())
     }
 
-    /// Where the surface point hit at time `t` is at time `t2`.
+    /// Where the surface point hit at scene time `t` is at scene time `t2`.
     pub fn advect(hit: &Hit, t: f64, t2: f64) -> DVec3 {
         match *hit {
             Hit::Room { p, .. } => p,
@@ -176,8 +204,18 @@ impl Scene {
         len - Self::blob_radius(d / len, t)
     }
 
-    /// Casts a ray (unit `d`) from `o` inside the room at time `t`.
+    /// Casts a ray (unit `d`) from `o` inside the room at frame time `t`.
     pub fn cast(&self, o: DVec3, d: DVec3, t: f64) -> Hit {
+        self.cast_at(o, d, self.motion.warp(t))
+    }
+
+    /// Shaded colour of a hit at frame time `t`.
+    pub fn shade(&self, hit: &Hit, t: f64) -> DVec3 {
+        self.shade_at(hit, self.motion.warp(t))
+    }
+
+    /// [`Scene::cast`] at scene time `t`.
+    fn cast_at(&self, o: DVec3, d: DVec3, t: f64) -> Hit {
         // Room: exit distance of the box interior.
         let mut best = f64::INFINITY;
         let mut face = 0;
@@ -248,8 +286,8 @@ impl Scene {
         hit
     }
 
-    /// Shaded colour of a hit at time `t`.
-    pub fn shade(&self, hit: &Hit, t: f64) -> DVec3 {
+    /// [`Scene::shade`] at scene time `t`.
+    fn shade_at(&self, hit: &Hit, t: f64) -> DVec3 {
         let light = DVec3::new(0.4, 1.0, 0.6).normalize();
         let (albedo, n) = match *hit {
             Hit::Room { p, n, face } => {
@@ -410,26 +448,29 @@ pub fn render_frame(scene: &Scene, k: usize, n: usize, width: u32, height: u32) 
     render_view(scene, &cam, k as f64 * dt, (k + 1) as f64 * dt)
 }
 
-/// Renders the scene at time `t` from `cam`, with the scene flow towards `t_next` seen by the same
-/// camera.
+/// Renders the scene at frame time `t` from `cam`, with the scene flow towards `t_next` seen by
+/// the same camera. Both times are warped by the scene's motion kind; the mask and the flow are
+/// zero everywhere when the warped times are equal (nothing moves in between).
 pub fn render_view(scene: &Scene, cam: &GenCamera, t: f64, t_next: f64) -> Rendered {
     let (w, h) = (cam.width as usize, cam.height as usize);
+    let (s, s_next) = (scene.motion.warp(t), scene.motion.warp(t_next));
+    let moving = s != s_next;
     let mut rgb = vec![0.0f32; w * h * 3];
     let mut mask = vec![0u8; w * h];
     let mut flow = vec![0.0f32; w * h * 2];
     for j in 0..h {
         for i in 0..w {
             let px = DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
-            let hit = scene.cast(cam.centre, cam.ray(px), t);
-            let c = scene.shade(&hit, t);
+            let hit = scene.cast_at(cam.centre, cam.ray(px), s);
+            let c = scene.shade_at(&hit, s);
             let o = j * w + i;
             rgb[o * 3..o * 3 + 3].copy_from_slice(&[c.x as f32, c.y as f32, c.z as f32]);
-            if !matches!(hit, Hit::Room { .. }) {
+            if moving && !matches!(hit, Hit::Room { .. }) {
                 mask[o] = 1;
                 let p = match hit {
                     Hit::Rigid { p } | Hit::Blob { p } | Hit::Room { p, .. } => p,
                 };
-                let p2 = Scene::advect(&hit, t, t_next);
+                let p2 = Scene::advect(&hit, s, s_next);
                 if let (Some(a), Some(b)) = (cam.project(p), cam.project(p2)) {
                     flow[o * 2] = (b.x - a.x) as f32;
                     flow[o * 2 + 1] = (b.y - a.y) as f32;
@@ -440,7 +481,8 @@ pub fn render_view(scene: &Scene, cam: &GenCamera, t: f64, t_next: f64) -> Rende
     Rendered { rgb, mask, flow }
 }
 
-/// Points on the surfaces at `t = 0` (raw world units), with ±0.01 uniform noise.
+/// Points on the surfaces at `t = 0` (raw world units), with ±0.01 uniform noise; `t = 0` is the
+/// rest pose of every motion kind.
 pub fn sample_points(seed: u64, n: usize) -> Vec<DVec3> {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0xB0B);
     let noise = 0.01;
@@ -524,10 +566,21 @@ pub fn is_val(k: usize) -> bool {
     k % 8 == 4
 }
 
-/// Generates the scene into `out` (created if needed; existing files are overwritten).
+/// Generates the moving scene into `out` (created if needed; existing files are overwritten).
 pub fn generate(preset: Preset, seed: u64, out: &Path) -> DataResult<Summary> {
+    generate_with(preset, seed, SceneMotion::Moving, out)
+}
+
+/// Generates the scene with the given motion kind into `out` (created if needed; existing files
+/// are overwritten).
+pub fn generate_with(
+    preset: Preset,
+    seed: u64,
+    motion: SceneMotion,
+    out: &Path,
+) -> DataResult<Summary> {
     let (w, h, n, n_points) = preset.dims();
-    let scene = Scene::new(seed);
+    let scene = Scene::with_motion(seed, motion);
     for d in ["camera", "rgb/1x", "mask/1x", "flow"] {
         mkdir(&out.join(d))?;
     }
@@ -571,9 +624,11 @@ pub fn generate(preset: Preset, seed: u64, out: &Path) -> DataResult<Summary> {
         &json!({
             "generator": "dispflow-vk data gen",
             "preset": preset.name(), "seed": seed, "width": w, "height": h, "frames": n,
-            "time": "frame k at t = k/(N-1); metadata time_id = k",
-            "mask": "mask/1x/<id>.png.png: 255 = pixel sees a moving object (rigid sphere or deforming blob)",
-            "flow": "flow/<id>.npy: HxWx2 f32 pixels; projection by camera k of the surface point at t_{k+1} minus at t_k; 0 on the static room",
+            "motion": motion.name(),
+            "time": "frame k at t = k/(N-1); metadata time_id = k; the camera follows t, the objects are posed at warp(t)",
+            "warp": "moving: t; static: 0; late: 0 for t <= 0.5, else (t - 0.5) * 2",
+            "mask": "mask/1x/<id>.png.png: 255 = pixel sees an object (rigid sphere or deforming blob) whose warped time changes between t_k and t_{k+1}",
+            "flow": "flow/<id>.npy: HxWx2 f32 pixels; projection by camera k of the surface point at warp(t_{k+1}) minus at warp(t_k); 0 where the mask is 0",
             "points": "points.npy: Nx3 f32 raw world positions on the surfaces at t=0, +-0.01 noise",
         }),
     )?;
@@ -619,6 +674,7 @@ pub fn generate(preset: Preset, seed: u64, out: &Path) -> DataResult<Summary> {
         dir: out.to_path_buf(),
         preset,
         seed,
+        motion,
         width: w,
         height: h,
         frames: n,
