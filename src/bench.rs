@@ -21,6 +21,7 @@ mod lpips_case;
 mod mlp_case;
 pub mod mlp_table;
 pub mod raster_scenes;
+pub mod sparsity;
 pub mod step;
 
 pub use lpips_case::*;
@@ -401,6 +402,9 @@ pub enum Suite {
     Step,
     /// LPIPS (AlexNet) of one image pair, random weights (the cost does not depend on them).
     Lpips,
+    /// The training step with the MLP over every Gaussian against split models (50, 20, 5,
+    /// 0 % dynamic), per zone.
+    Sparsity,
 }
 
 #[derive(clap::Args, Debug)]
@@ -587,6 +591,10 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
     }
     if has(Suite::Step) {
         let st = step::run_step_bench(&gpu, args.warm_steps, args.steps)?;
+        rows.extend(step::report(&gpu, &st, args.reps)?);
+    }
+    if has(Suite::Sparsity) {
+        let st = sparsity::run_sparsity_bench(&gpu, args.warm_steps, args.steps)?;
         rows.extend(step::report(&gpu, &st, args.reps)?);
     }
     if has(Suite::Lpips) {

@@ -539,9 +539,9 @@ mod gpu_step {
 
     use dispflow_vk::kernels::motion::{NormConfig, NormMode};
     use dispflow_vk::kernels::raster::Rasterizer;
+    use dispflow_vk::model::dynamic::{DynamicSet, SplitSnapshot};
     use dispflow_vk::model::gaussians::Section;
     use dispflow_vk::model::state::{mlp_config_for, DeformState, GaussianState, Model};
-    use dispflow_vk::model::dynamic::DynamicSet;
     use dispflow_vk::reference::step::{dispflow_step, NormGradMode, StepOutputs};
     use dispflow_vk::testing;
     use dispflow_vk::train::config::{DensifyConfig, MotionOrder};
@@ -563,7 +563,9 @@ mod gpu_step {
         photo_loss: f64,
     }
 
-    fn run_gpu_step(gpu: &Gpu, s: &Scene, weight: f32) -> GpuGrads {
+    /// `split`: the model split with every Gaussian dynamic (the split path — gather, compact
+    /// MLP, expand, gradient gather — must give the dense path's numbers).
+    fn run_gpu_step(gpu: &Gpu, s: &Scene, weight: f32, split: bool) -> GpuGrads {
         let cap = s.gaussians.len() as u32;
         assert_eq!(
             small_mlp(),
@@ -573,11 +575,18 @@ mod gpu_step {
         let deform = DeformState::new(gpu, small_mlp(), 0, false).unwrap();
         assert_eq!(deform.layout, s.layout);
         gpu.upload(deform.params.all(), &s.mlp_params).unwrap();
-        let model = Model {
+        let mut model = Model {
             gaussians: GaussianState::new(gpu, cap, s.sh_degree, &s.gaussians).unwrap(),
             deform,
             dynamic: DynamicSet::new(gpu, cap).unwrap(),
         };
+        if split {
+            let all = SplitSnapshot {
+                flags: vec![1; cap as usize],
+                fixed: vec![0.0; 10 * cap as usize],
+            };
+            model.dynamic.upload(gpu, Some(&all)).unwrap();
+        }
         for b in [&model.gaussians.grads, &model.deform.grads] {
             testing::fill_noise(gpu, b, 7);
         }
@@ -620,6 +629,7 @@ mod gpu_step {
             adam: AdamPass::new(gpu).unwrap(),
             densify: DensifyPass::new(gpu, densify, 1.0, 0).unwrap(),
             watch: OverflowWatch::new(gpu, "test overflow", 2).unwrap(),
+            classifier: None,
         };
         let frame = |time: f32| GpuFrame {
             id: format!("t{time}"),
@@ -657,6 +667,8 @@ mod gpu_step {
             densify_stats: false,
             densify: None,
             opacity_reset: false,
+            sparse: split,
+            classify: false,
         };
         let mut rec = Recorder::new(gpu).unwrap();
         record_step(&mut rec, &plan, &model, &mut passes, &frames, 0.2);
@@ -735,12 +747,12 @@ mod gpu_step {
     fn gpu_step_matches_the_twin_composition() {
         let gpu = testing::gpu();
         let s = scene(5, 40);
-        for weight in [0.5f32, 0.0] {
+        for (weight, split) in [(0.5f32, false), (0.0, false), (0.5, true)] {
             let twin = dispflow_step(&s.inputs(weight, NormGradMode::Detached));
             assert!(weight == 0.0 || !twin.motion_skipped);
-            let got = run_gpu_step(&gpu, &s, weight);
+            let got = run_gpu_step(&gpu, &s, weight, split);
             let errs = rel_errors(&got, &twin_groups(&s, &twin));
-            eprintln!("α = {weight}: photo loss GPU {:.6} twin {:.6}; max |Δ| / max |twin| per group: {errs:?}", got.photo_loss, twin.photo_loss);
+            eprintln!("α = {weight}, split {split}: photo loss GPU {:.6} twin {:.6}; max |Δ| / max |twin| per group: {errs:?}", got.photo_loss, twin.photo_loss);
             assert!((got.photo_loss - twin.photo_loss).abs() < 1e-5 * twin.photo_loss.max(1.0));
             // f32 on the GPU (float atomics in blend backward, f32 MLP) against f64: 1e-3 of
             // the group's largest gradient, ~10× above what was measured (see the note).
@@ -754,7 +766,7 @@ mod gpu_step {
         // The motion term is not a no-op: its gradients change every group the test compares.
         let with = twin_groups(&s, &dispflow_step(&s.inputs(0.5, NormGradMode::Detached)));
         let without = twin_groups(&s, &dispflow_step(&s.inputs(0.0, NormGradMode::Detached)));
-        let gpu_with = run_gpu_step(&gpu, &s, 0.5);
+        let gpu_with = run_gpu_step(&gpu, &s, 0.5, false);
         for (((name, a), (_, b)), (_, g)) in with.iter().zip(&without).zip(&gpu_with.groups) {
             let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             let diff = a

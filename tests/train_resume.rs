@@ -94,3 +94,51 @@ fn evaluating_mid_run_does_not_change_training() {
         "evaluating at iteration 30 changed the trained parameters, moments or statistics"
     );
 }
+
+/// A checkpoint taken while the model is split (flags and static deformations in it)
+/// resumes bit-identically.
+#[test]
+fn split_checkpoint_resumes_bit_identically() {
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let mut cfg = tiny_config(120);
+    cfg.warm_up = 40;
+    cfg.sparsity.start = 0.1; // first split after 48, re-splits every 20
+    cfg.sparsity.threshold_px = 0.0; // above the median: about half of them dynamic
+    cfg.sparsity.noise_k = 1.0;
+    cfg.densify.until = 0;
+    assert_eq!(
+        cfg.sparsity.mode,
+        dispflow_vk::train::config::SparsityMode::Auto
+    );
+    let run_to = |tr: &mut Trainer, end: u32| {
+        while tr.iteration < end {
+            tr.step(false, false).unwrap();
+        }
+    };
+    let mut a = Trainer::new(&gpu, &cfg, &ds).unwrap();
+    run_to(&mut a, 120);
+    let straight = a.checkpoint().unwrap();
+    let mut b = Trainer::new(&gpu, &cfg, &ds).unwrap();
+    run_to(&mut b, 60);
+    let c60 = b.checkpoint().unwrap();
+    let split = c60
+        .model
+        .dynamic
+        .as_ref()
+        .expect("iteration 60 is inside a split stretch");
+    let dynamic = split.flags.iter().filter(|&&f| f == 1).count();
+    assert!(
+        dynamic > 0 && dynamic < split.flags.len(),
+        "{dynamic} dynamic"
+    );
+    let path = tmp.path().join("split.ckpt");
+    c60.save(&path).unwrap();
+    let mut c = Trainer::new(&gpu, &cfg, &ds).unwrap();
+    c.restore(&Checkpoint::load(&path).unwrap()).unwrap();
+    assert_eq!(c.dynamic_fraction(), b.dynamic_fraction());
+    run_to(&mut c, 120);
+    assert!(c.checkpoint().unwrap() == straight, "resumed run differs");
+}

@@ -376,9 +376,17 @@ struct ProbeParams {
     uint n;             // Gaussians
     uint num_cams;      // training cameras (>= 1)
     uint first;         // 1: the first sample (the running maximum starts here)
-    uint last;          // 1: the last sample (the flags are written)
-    float threshold_px; // apparent motion (pixels) above which a Gaussian is dynamic
+    uint last;          // 1: the last sample (midrange and pixels are written)
     float near;         // distances to a camera are clamped to at least this (scene units)
+    uint pad0;
+    uint pad1;
+    uint pad2;
+};
+
+// src/kernels/sparse.rs: the dynamic flags from the probe's pixels.
+struct FlagParams {
+    uint n;
+    float threshold_px; // apparent motion (pixels) above which a Gaussian is dynamic
     uint pad0;
     uint pad1;
 };

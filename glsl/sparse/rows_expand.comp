@@ -1,7 +1,7 @@
 #version 460
-// dst[i] = src[row_of[i]] for every Gaussian, or a row of exact zeros where row_of[i] is
-// NO_ROW (a static Gaussian: D ≡ 0). Writes every row, so nothing stale survives a
-// reclassification.
+// dst[i] = src[row_of[i]] for every Gaussian, or the Gaussian's own constant row
+// `fixed[i]` where row_of[i] is NO_ROW (a static Gaussian: its time-constant deformation,
+// so its displacement between any two times is exactly 0). Writes every row.
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 #include "params.glsl"
@@ -11,7 +11,8 @@ layout(local_size_x = 256) in;
 layout(push_constant) uniform Push { RowsParams pc; };
 layout(std430, binding = 0) readonly buffer RowOf { uint row_of[]; }; // [N]
 layout(std430, binding = 1) readonly buffer Src { float src[]; };     // [count, width]
-layout(std430, binding = 2) writeonly buffer Dst { float dst[]; };    // [N, width]
+layout(std430, binding = 2) readonly buffer Fixed { float fixed_rows[]; }; // [N, width]
+layout(std430, binding = 3) writeonly buffer Dst { float dst[]; };    // [N, width]
 
 const uint NO_ROW = 0xffffffffu;
 
@@ -19,5 +20,6 @@ void main() {
     uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.n) return;
     uint r = row_of[i], o = i * pc.width;
-    for (uint c = 0; c < pc.width; ++c) dst[o + c] = r == NO_ROW ? 0.0 : src[r * pc.width + c];
+    for (uint c = 0; c < pc.width; ++c)
+        dst[o + c] = r == NO_ROW ? fixed_rows[o + c] : src[r * pc.width + c];
 }

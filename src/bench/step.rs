@@ -10,7 +10,7 @@ use crate::data::{self, synthetic::Preset as ScenePreset};
 use crate::error::Result;
 use crate::kernels::mlp_fused::FmaPeak;
 use crate::train::cli::{builtin_scene, load_options};
-use crate::train::config::{Preset, TrainConfig};
+use crate::train::config::{Preset, SparsityMode, TrainConfig};
 use crate::train::Trainer;
 use crate::vk::{Gpu, Recorder, Timings};
 
@@ -63,8 +63,44 @@ fn zones(t: &Timings) -> Vec<(String, f64)> {
     out
 }
 
+/// `steps` timed steps (after `warm` untimed ones) of every trainer, interleaved so load on a
+/// shared machine hits them alike.
+pub(crate) fn time_interleaved(
+    trainers: &mut [Trainer],
+    warm: u32,
+    steps: u32,
+) -> Result<Vec<Vec<Timings>>> {
+    let mut times: Vec<Vec<Timings>> = vec![Vec::new(); trainers.len()];
+    for _ in 0..warm {
+        for tr in trainers.iter_mut() {
+            tr.step(false, false)?;
+        }
+    }
+    for _ in 0..steps {
+        for (tr, t) in trainers.iter_mut().zip(&mut times) {
+            let log = tr.step(true, true)?.expect("values asked");
+            t.push(log.timings);
+        }
+    }
+    Ok(times)
+}
+
+/// Median ms per zone over steps.
+pub(crate) fn median_zones(t: &[Timings]) -> Vec<(String, f64)> {
+    let mut zs: Vec<(String, Vec<f64>)> = Vec::new();
+    for z in t.iter().map(zones) {
+        for (name, ms) in z {
+            match zs.iter_mut().find(|e| e.0 == name) {
+                Some(e) => e.1.push(ms),
+                None => zs.push((name, vec![ms])),
+            }
+        }
+    }
+    zs.into_iter().map(|(n, v)| (n, median(v))).collect()
+}
+
 /// The scenes: the built-in one, and mujoco-scene7 when the shared data is present.
-fn scenes() -> Result<Vec<(String, PathBuf)>> {
+pub(crate) fn scenes() -> Result<Vec<(String, PathBuf)>> {
     let mut v = vec![(
         "built-in".to_string(),
         builtin_scene(ScenePreset::Small, 0)?,
@@ -88,6 +124,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             cfg.motion_start = 0;
             cfg.motion_weight = weight;
             cfg.densify.from = u32::MAX;
+            cfg.sparsity.mode = SparsityMode::Off; // kernels, not the split: `bench sparsity`
             let data = data::load(&dir, &load_options(&cfg))?;
             let mut trainers = Vec::new();
             for k in KERNEL_SETS {
@@ -101,36 +138,15 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             std::env::remove_var("DISPFLOW_MLP_KERNELS");
             std::env::remove_var("DISPFLOW_BLEND_FWD");
             std::env::remove_var("DISPFLOW_BLEND_BWD");
-            let mut times: Vec<Vec<Timings>> = vec![Vec::new(); trainers.len()];
-            for _ in 0..warm {
-                for tr in &mut trainers {
-                    tr.step(false, false)?;
-                }
-            }
-            for _ in 0..steps {
-                for (tr, t) in trainers.iter_mut().zip(&mut times) {
-                    let log = tr.step(true, true)?.expect("values asked");
-                    t.push(log.timings);
-                }
-            }
+            let times = time_interleaved(&mut trainers, warm, steps)?;
             for ((tr, t), k) in trainers.iter().zip(times).zip(KERNEL_SETS) {
-                let med = median(t.iter().map(Timings::total_ms).collect());
-                let mut zs: Vec<(String, Vec<f64>)> = Vec::new();
-                for z in t.iter().map(zones) {
-                    for (name, ms) in z {
-                        match zs.iter_mut().find(|e| e.0 == name) {
-                            Some(e) => e.1.push(ms),
-                            None => zs.push((name, vec![ms])),
-                        }
-                    }
-                }
                 rows.push(StepRow {
                     scene: scene.clone(),
                     method,
                     kernels: k.name,
                     gaussians: tr.n(),
-                    median_ms: med,
-                    zones: zs.into_iter().map(|(n, v)| (n, median(v))).collect(),
+                    median_ms: median(t.iter().map(Timings::total_ms).collect()),
+                    zones: median_zones(&t),
                 });
             }
         }

@@ -80,6 +80,9 @@ pub struct FrameImages {
     /// Min-max normalised optical-flow magnitude frozen render → ground truth.
     pub scene_motion: Option<Vec<f32>>,
     pub mask: Option<Vec<u8>>,
+    /// Blend weight on dynamic Gaussians per pixel (see [`Evaluator::dynamic_mask`]), when
+    /// the caller asked for it.
+    pub dynamic: Option<Vec<f32>>,
 }
 
 /// One evaluated view: camera and time, the predecessor time for the displacement flow, and
@@ -190,6 +193,52 @@ impl Evaluator {
             frame: None,
         };
         self.evaluate(gpu, model, view, v, true)
+    }
+
+    /// The dynamic mask of view `(camera, t)`: each pixel's blend weight on dynamic Gaussians
+    /// ([H·W], 0 where only static Gaussians are seen, the coverage where the model is dense).
+    pub fn dynamic_mask(
+        &mut self,
+        gpu: &Gpu,
+        model: &Model,
+        view: ModelView,
+        camera: &Camera,
+        t: f32,
+    ) -> Result<Vec<f32>> {
+        let n = model.gaussians.n as usize;
+        let flags = match model.dynamic.download(gpu, n as u32)? {
+            Some(s) => s.flags,
+            None => vec![1; n],
+        };
+        let feats: Vec<f32> = flags.iter().flat_map(|&f| [f as f32; 3]).collect();
+        if n > 0 {
+            gpu.upload(self.delta.elems::<f32>(0, feats.len() as u64), &feats)?;
+        }
+        let opts = RenderOpts {
+            background: [0.0; 3],
+            alpha_max: ALPHA_MAX,
+        };
+        loop {
+            let mut rec = Recorder::new(gpu)?;
+            let time = view.deform_active.then_some(t);
+            self.deform.forward(&mut rec, model, Slot::T1, time);
+            let mut splats = model
+                .gaussians
+                .splats(self.deform.drawn(Slot::T1), view.sh_degree);
+            splats.features = Some((self.delta.all(), 3));
+            self.render.forward(&mut rec, camera, &splats, &opts);
+            self.watch.record(&mut rec, 0, &self.render);
+            self.watch.publish(&mut rec);
+            rec.finish()?;
+            let o = self.watch.read(0);
+            if o.overflowed {
+                self.render.grow(gpu, o.needed)?;
+                continue;
+            }
+            let px = camera.width as u64 * camera.height as u64;
+            let f: Vec<f32> = gpu.read(self.render.features().buf.elems::<f32>(0, 3 * px))?;
+            return Ok(f.chunks_exact(3).map(|c| c[0]).collect());
+        }
     }
 
     /// The render at (v, D(t)) of the last evaluated view, [H·W] RGBA.
@@ -395,6 +444,7 @@ impl Evaluator {
                 motion: motion[..n].to_vec(),
                 scene_motion,
                 mask: mask.map(|m| m.1.clone()),
+                dynamic: None,
             })
         } else {
             None

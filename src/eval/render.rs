@@ -47,7 +47,8 @@ pub struct RenderArgs {
     /// Frames of the fixed/orbit/spiral paths.
     #[arg(long, default_value_t = 60)]
     pub frames: u32,
-    /// Put the displacement-flow heatmap (motion since the previous dataset time) beside
+    /// Put the displacement-flow heatmap (motion since the previous dataset time) and the
+    /// dynamic mask (white where the render sees Gaussians the deformation moves) beside
     /// each frame.
     #[arg(long)]
     pub flow: bool,
@@ -281,7 +282,13 @@ pub fn run_render(a: &RenderArgs) -> Result<Vec<PathBuf>> {
         let img = if a.flow {
             let heat = report::heatmap(&im.motion, w, h)?;
             let t_label = format!("t={:.3}", v.time);
-            report::labelled_strip(&[(t_label.as_str(), &render), ("disp. flow", &heat)])?
+            let dynamic = tr.dynamic_mask(&v.camera, v.time)?;
+            let dynamic = super::run::grey_image(&dynamic, w, h)?;
+            report::labelled_strip(&[
+                (t_label.as_str(), &render),
+                ("disp. flow", &heat),
+                ("dynamic", &dynamic),
+            ])?
         } else {
             render
         };

@@ -44,7 +44,23 @@ pub struct Report {
     /// Mean dynamic fraction over the training steps that ran the MLP (`train` only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mean_dynamic_fraction: Option<f64>,
+    /// Median wall ms per step by what the step ran (`train` only; empty otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub ms_per_step_by_phase: Vec<PhaseMs>,
+    /// Wall seconds of all training steps of the last launch (`train` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub train_seconds: Option<f64>,
     pub per_frame: Vec<FrameEval>,
+}
+
+/// Median wall ms per training step of one kind (what the step ran).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct PhaseMs {
+    /// `no MLP` (warm-up or `--deform off`), `MLP over all` or `MLP over dynamic`, each
+    /// `+ motion` when the step had the motion term.
+    pub phase: String,
+    pub steps: u32,
+    pub median_ms: f64,
 }
 
 /// What a report says about where it came from.
@@ -82,6 +98,8 @@ impl Report {
             ms_per_step: None,
             dynamic_fraction: None,
             mean_dynamic_fraction: None,
+            ms_per_step_by_phase: Vec::new(),
+            train_seconds: None,
             per_frame: per,
         }
     }

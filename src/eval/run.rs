@@ -10,6 +10,7 @@ use super::{FrameEval, FrameImages};
 use crate::data::{self, Dataset};
 use crate::error::{Error, Result};
 use crate::model::deform::MlpLayout;
+use crate::model::dynamic::SplitSnapshot;
 use crate::model::gaussians::HostGaussians;
 use crate::model::state::{gaussian_blobs, mlp_config_for};
 use crate::report::{self, Plot, Series, PALETTE};
@@ -27,8 +28,23 @@ pub struct Run {
     pub iterations: u32,
     pub gaussians: HostGaussians,
     pub mlp: Vec<f32>,
-    /// The dynamic/static split (`dynamic.bin`, a byte per Gaussian); `None`: all dynamic.
-    pub dynamic: Option<Vec<u32>>,
+    /// The dynamic/static split (`dynamic.bin`); `None`: all dynamic.
+    pub dynamic: Option<SplitSnapshot>,
+}
+
+/// Floats per Gaussian in `dynamic.bin`: the flag (0.0 static, 1.0 dynamic), then the
+/// static deformation (dx 3, dr 4, ds 3) the Gaussian is drawn with while static.
+pub const DYN_ROW: usize = 11;
+
+/// `dynamic.bin`: little-endian f32 rows of [`DYN_ROW`], one per Gaussian of
+/// `point_cloud.ply`, in its order. Absent: every Gaussian dynamic.
+pub fn dynamic_bin(s: &SplitSnapshot) -> Vec<u8> {
+    let mut v = Vec::with_capacity(DYN_ROW * s.flags.len());
+    for (f, row) in s.flags.iter().zip(s.fixed.chunks_exact(10)) {
+        v.push(*f as f32);
+        v.extend_from_slice(row);
+    }
+    bytemuck::cast_slice(&v).to_vec()
 }
 
 fn invalid(path: &Path, why: impl std::fmt::Display) -> Error {
@@ -163,23 +179,34 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
             path: dyn_path.display().to_string(),
             source,
         })?;
-        if b.len() != gaussians.len() {
+        let want = 4 * DYN_ROW * gaussians.len();
+        if b.len() != want {
             return Err(invalid(
                 &dyn_path,
                 format!(
-                    "{} bytes; point_cloud.ply's {} Gaussians need one byte each",
+                    "{} bytes; point_cloud.ply's {} Gaussians need {want} ({DYN_ROW} f32 each)",
                     b.len(),
                     gaussians.len()
                 ),
             ));
         }
-        if let Some(i) = b.iter().position(|&v| v > 1) {
-            return Err(invalid(
-                &dyn_path,
-                format!("byte {i} is {}; expected 0 (static) or 1 (dynamic)", b[i]),
-            ));
+        let v: Vec<f32> = bytemuck::pod_collect_to_vec(&b);
+        let mut s = SplitSnapshot::default();
+        for (i, row) in v.chunks_exact(DYN_ROW).enumerate() {
+            s.flags.push(match row[0] {
+                0.0 => 0,
+                1.0 => 1,
+                f => {
+                    return Err(invalid(
+                        &dyn_path,
+                        format!("Gaussian {i}: flag {f}; expected 0 (static) or 1 (dynamic)"),
+                    ))
+                }
+            });
+            s.fixed.extend_from_slice(&row[1..]);
         }
-        Some(b.iter().map(|&v| v as u32).collect())
+        s.check().map_err(|e| invalid(&dyn_path, e))?;
+        Some(s)
     } else {
         None
     };
@@ -200,7 +227,7 @@ pub fn load_trainer<'g>(gpu: &'g Gpu, run: &Run) -> Result<(Dataset, Trainer<'g>
     let mut tr = Trainer::new(gpu, &run.cfg, &ds)?;
     tr.load_model(&run.gaussians, &run.mlp, run.iterations)
         .map_err(|e| invalid(&run.dir, format!("the saved model does not load: {e}")))?;
-    tr.model.dynamic.upload(gpu, run.dynamic.as_deref())?;
+    tr.model.dynamic.upload(gpu, run.dynamic.as_ref())?;
     Ok((ds, tr))
 }
 
@@ -284,7 +311,9 @@ fn eval_one(
                 invalid(&s.source, format!("LPIPS of test frame {:?}: {err}", e.id))
             })?);
         }
-        if let Some(im) = e.images.take() {
+        if let Some(mut im) = e.images.take() {
+            let (cam, t) = (tr.val[i].camera, tr.val[i].time);
+            im.dynamic = Some(tr.dynamic_mask(&cam, t)?);
             let path = out.join("frames").join(frame_png(i, &e.id));
             report::save_png(&frame_strip(&im)?, &path)?;
         }
@@ -387,8 +416,17 @@ pub fn frame_strip(im: &FrameImages) -> Result<image::RgbImage> {
     if let Some(m) = &im.mask {
         panels.push(("motion mask", report::mask_image(m, w, h)?));
     }
+    if let Some(d) = &im.dynamic {
+        panels.push(("dynamic", grey_image(d, w, h)?));
+    }
     let refs: Vec<(&str, &image::RgbImage)> = panels.iter().map(|(l, i)| (*l, i)).collect();
     report::labelled_strip(&refs)
+}
+
+/// Values in [0, 1] as a grey picture (white = 1).
+pub fn grey_image(v: &[f32], w: u32, h: u32) -> Result<image::RgbImage> {
+    let px: Vec<[f32; 4]> = v.iter().map(|&x| [x, x, x, 1.0]).collect();
+    report::rgb_image(&px, w, h)
 }
 
 fn per_frame_plot(per: &[FrameEval]) -> Result<image::RgbImage> {

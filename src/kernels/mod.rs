@@ -38,11 +38,12 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             num_cams,
             first,
             last,
-            threshold_px,
             near,
             pad0,
-            pad1
+            pad1,
+            pad2
         ),
+        layout!(sparse::FlagParams, n, threshold_px, pad0, pad1),
         layout!(sparse::RowsParams, n, width, pad0, pad1),
         layout!(
             densify::DensifyStatsParams,

@@ -1,10 +1,14 @@
 //! Which Gaussians the deformation moves: the model's dynamic/static split.
 //!
-//! DESIGN (issue 15). A *static* Gaussian is drawn with D ≡ 0: its displacement, and so its
-//! displacement flow, is exactly zero, and the MLP never sees it. The split is part of the
-//! model (checkpoints and exported runs carry it), decided by the motion probe
-//! (`train::passes::sparsity`) from the deformation itself: a Gaussian is dynamic when D
-//! moves it by more than a threshold in pixels of some training view at any probed time.
+//! DESIGN (issue 15). A *static* Gaussian is drawn with a constant deformation `fixed[i]`
+//! (the midrange of D over the probed times) instead of D(x, t): its displacement between any
+//! two times, and so its displacement flow, is exactly zero, and the MLP never sees it. Why
+//! not D ≡ 0: the MLP's time-constant part is an offset the canonical Gaussian was trained
+//! together with; on the built-in scene it is 2.7 px at the median Gaussian (measured), so
+//! dropping it would move every static Gaussian. The split is part of the model (checkpoints
+//! and exported runs carry it), decided by the motion probe (`train::passes::sparsity`) from
+//! the deformation itself: a Gaussian is dynamic when D *varies* by more than a threshold in
+//! pixels of some training view over the probed times.
 //! `None` = every Gaussian dynamic (the dense path: the warm-up, the dense windows that let a
 //! static Gaussian become dynamic again, `--sparsity off`). Counts are learnt on the host
 //! when the split is made (a synchronisation point like densification), never inside a step.
@@ -23,6 +27,8 @@ pub struct DynamicSet {
     pub row_of: Buffer,
     /// [1] u32 written by the GPU compaction (read after the classification's submit).
     pub count: Buffer,
+    /// [capacity, 10] the constant deformation of each static Gaussian.
+    pub fixed: Buffer,
     split: Option<u32>,
 }
 
@@ -36,6 +42,7 @@ impl DynamicSet {
             idx: rows("dynamic indices")?,
             row_of: rows("dynamic row of")?,
             count: gpu.buffer("dynamic count", 256)?,
+            fixed: gpu.buffer("static deformation", capacity.max(1) as u64 * 40)?,
             split: None,
         })
     }
@@ -72,22 +79,31 @@ impl DynamicSet {
         self.row_of.all()
     }
 
-    /// The flags of the `n` live Gaussians (`None` when dense), for checkpoints and exports.
-    pub fn download(&self, gpu: &Gpu, n: u32) -> Result<Option<Vec<u32>>> {
+    pub fn fixed(&self) -> BufSlice<'_> {
+        self.fixed.all()
+    }
+
+    /// The split of the `n` live Gaussians (`None` when dense), for checkpoints and exports.
+    pub fn download(&self, gpu: &Gpu, n: u32) -> Result<Option<SplitSnapshot>> {
         match self.split {
             None => Ok(None),
-            Some(_) if n == 0 => Ok(Some(Vec::new())),
-            Some(_) => gpu.read(self.flags.elems::<u32>(0, n as u64)).map(Some),
+            Some(_) if n == 0 => Ok(Some(SplitSnapshot::default())),
+            Some(_) => Ok(Some(SplitSnapshot {
+                flags: gpu.read(self.flags.elems::<u32>(0, n as u64))?,
+                fixed: gpu.read(self.fixed.elems::<f32>(0, 10 * n as u64))?,
+            })),
         }
     }
 
-    /// Splits by host flags (a restored checkpoint or a loaded run): uploads the flags and
-    /// their compaction. `None` makes the model dense.
-    pub fn upload(&mut self, gpu: &Gpu, flags: Option<&[u32]>) -> Result<()> {
-        let Some(flags) = flags else {
+    /// Splits as `s` says (a restored checkpoint or a loaded run): uploads the flags, the
+    /// static deformations and the compaction. `None` makes the model dense.
+    pub fn upload(&mut self, gpu: &Gpu, s: Option<&SplitSnapshot>) -> Result<()> {
+        let Some(s) = s else {
             self.split = None;
             return Ok(());
         };
+        s.check()?;
+        let flags = &s.flags[..];
         if flags.len() > self.capacity as usize {
             return Err(Error::Capacity {
                 what: "dynamic flags",
@@ -95,21 +111,51 @@ impl DynamicSet {
                 asked: flags.len() as u64,
             });
         }
-        if let Some(i) = flags.iter().position(|&f| f > 1) {
-            return Err(Error::Invalid(format!(
-                "dynamic flag of Gaussian {i} is {}; expected 0 (static) or 1 (dynamic)",
-                flags[i]
-            )));
-        }
         let (idx, row_of) = compact(flags);
         if !flags.is_empty() {
             gpu.upload(self.flags.elems::<u32>(0, flags.len() as u64), flags)?;
             gpu.upload(self.row_of.elems::<u32>(0, flags.len() as u64), &row_of)?;
+            gpu.upload(self.fixed.elems::<f32>(0, s.fixed.len() as u64), &s.fixed)?;
         }
         if !idx.is_empty() {
             gpu.upload(self.idx.elems::<u32>(0, idx.len() as u64), &idx)?;
         }
         self.split = Some(idx.len() as u32);
+        Ok(())
+    }
+}
+
+/// The split on the host: flags (0/1) and the static Gaussians' constant deformation [N,10].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SplitSnapshot {
+    pub flags: Vec<u32>,
+    pub fixed: Vec<f32>,
+}
+
+impl SplitSnapshot {
+    /// Refuses flags other than 0/1, a length mismatch or a non-finite static deformation.
+    pub fn check(&self) -> Result<()> {
+        let n = self.flags.len();
+        if self.fixed.len() != 10 * n {
+            return Err(Error::Invalid(format!(
+                "dynamic split: {} static-deformation floats for {n} Gaussians; expected {}",
+                self.fixed.len(),
+                10 * n
+            )));
+        }
+        if let Some(i) = self.flags.iter().position(|&f| f > 1) {
+            return Err(Error::Invalid(format!(
+                "dynamic flag of Gaussian {i} is {}; expected 0 (static) or 1 (dynamic)",
+                self.flags[i]
+            )));
+        }
+        if let Some(j) = self.fixed.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "static deformation of Gaussian {} is {}; expected finite values",
+                j / 10,
+                self.fixed[j]
+            )));
+        }
         Ok(())
     }
 }

@@ -4,7 +4,7 @@
 //! trainer never reaches into a pass for model data.
 
 use super::deform::{MlpConfig, MlpLayout, TimeEncoding};
-use super::dynamic::DynamicSet;
+use super::dynamic::{DynamicSet, SplitSnapshot};
 use super::gaussians::{GaussianLayout, HostGaussians, Section};
 use crate::error::{Error, Result};
 use crate::kernels::deform::Canonical;
@@ -245,8 +245,8 @@ pub struct ModelSnapshot {
     pub mlp_params: Vec<f32>,
     pub mlp_m: Vec<f32>,
     pub mlp_v: Vec<f32>,
-    /// Dynamic flags per Gaussian (0/1) when the model is split; `None` when dense.
-    pub dynamic: Option<Vec<u32>>,
+    /// The dynamic/static split when the model is split; `None` when dense.
+    pub dynamic: Option<SplitSnapshot>,
 }
 
 /// One named array of a snapshot, as checkpoints store it.
@@ -410,19 +410,14 @@ impl Model {
             }
             b.check_values()?;
         }
-        if let Some(f) = &s.dynamic {
-            if f.len() != n {
+        if let Some(d) = &s.dynamic {
+            if d.flags.len() != n {
                 return mismatch(format!(
                     "blob dynamic: {} flags; {n} Gaussians need {n}",
-                    f.len()
+                    d.flags.len()
                 ));
             }
-            if let Some(i) = f.iter().position(|&v| v > 1) {
-                return mismatch(format!(
-                    "blob dynamic: element {i} (Gaussian {i}) is {}; expected 0 or 1",
-                    f[i]
-                ));
-            }
+            d.check()?;
         }
         Ok(())
     }
@@ -440,7 +435,7 @@ impl Model {
         gpu.upload(d.params.all(), &s.mlp_params)?;
         gpu.upload(d.m.all(), &s.mlp_m)?;
         gpu.upload(d.v.all(), &s.mlp_v)?;
-        self.dynamic.upload(gpu, s.dynamic.as_deref())?;
+        self.dynamic.upload(gpu, s.dynamic.as_ref())?;
         Ok(())
     }
 

@@ -6,7 +6,8 @@
 //! format version, the iteration, the model's shape (SH coefficients, MLP depth and width,
 //! Gaussian budget) and per blob its name, length in floats and FNV-1a 64 of its bytes (hex).
 //! Every length and checksum is checked on read; a mismatch names the file and the blob.
-//! The optional blob `dynamic` (0.0/1.0 per Gaussian) is the model's dynamic/static split.
+//! The optional blobs `dynamic` (0.0/1.0 per Gaussian) and `dynamic_fixed` (10 per Gaussian)
+//! are the model's dynamic/static split.
 //! Small and dependency-free.
 
 use std::collections::BTreeMap;
@@ -16,6 +17,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::model::dynamic::SplitSnapshot;
 use crate::model::gaussians::HostGaussians;
 use crate::model::state::{ModelShape, ModelSnapshot};
 
@@ -174,10 +176,11 @@ impl Checkpoint {
             blobs.push((k.to_string(), v));
         }
         // Flags as 0.0/1.0 (every blob is f32); absent while the model is dense.
-        let dynamic: Option<Vec<f32>> = (self.model.dynamic.as_ref())
-            .map(|f| f.iter().map(|&v| v as f32).collect());
-        if let Some(d) = &dynamic {
-            blobs.push(("dynamic".to_string(), d));
+        let dynamic: Option<Vec<f32>> =
+            (self.model.dynamic.as_ref()).map(|d| d.flags.iter().map(|&v| v as f32).collect());
+        if let (Some(f), Some(d)) = (&dynamic, &self.model.dynamic) {
+            blobs.push(("dynamic".to_string(), f));
+            blobs.push(("dynamic_fixed".to_string(), &d.fixed));
         }
         let header = Header {
             version: CHECKPOINT_VERSION,
@@ -316,6 +319,7 @@ impl Checkpoint {
         if mlp_m.len() != mlp_params.len() || mlp_v.len() != mlp_params.len() {
             return Err(bad(path, "MLP moments disagree with the parameter count"));
         }
+        let fixed = m.remove("dynamic_fixed");
         let dynamic = match m.remove("dynamic") {
             None => None,
             Some(d) if d.len() != n => {
@@ -337,6 +341,22 @@ impl Checkpoint {
                     })
                     .collect::<Result<Vec<u32>>>()?,
             ),
+        };
+        let dynamic = match (dynamic, fixed) {
+            (None, None) => None,
+            (Some(flags), Some(fixed)) if fixed.len() == 10 * n => {
+                Some(SplitSnapshot { flags, fixed })
+            }
+            _ => {
+                return Err(bad(
+                    path,
+                    &format!(
+                        "blobs dynamic and dynamic_fixed: both or neither, with {n} and {} \
+                         floats",
+                        10 * n
+                    ),
+                ))
+            }
         };
         if let Some(k) = m.keys().next() {
             return Err(bad(path, &format!("unexpected blob {k}")));

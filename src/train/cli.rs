@@ -98,6 +98,10 @@ pub struct TrainArgs {
     /// deformation may give a Gaussian treated as static [default: 0.5].
     #[arg(long)]
     pub sparsity_threshold: Option<f32>,
+    /// A Gaussian must also move more than this multiple of the median Gaussian's motion to
+    /// be dynamic (the MLP's noise floor); 0 = the pixel threshold alone [default: 3].
+    #[arg(long)]
+    pub sparsity_noise_k: Option<f32>,
     /// Re-split (after a dense window) every this fraction of the deformation's iterations
     /// [default: 0.25].
     #[arg(long)]
@@ -210,6 +214,7 @@ pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
     c.sparsity.mode = a.sparsity.unwrap_or(c.sparsity.mode);
     c.sparsity.threshold_px = a.sparsity_threshold.unwrap_or(c.sparsity.threshold_px);
     c.sparsity.every = a.probe_every.unwrap_or(c.sparsity.every);
+    c.sparsity.noise_k = a.sparsity_noise_k.unwrap_or(c.sparsity.noise_k);
     c.validate()?;
     Ok(c)
 }
@@ -314,7 +319,10 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     pb.set_position(tr.iteration as u64);
     let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let mut step_ms = Vec::new();
+    // Wall ms per step by what the step ran (in first-seen order).
+    let mut phase_ms: Vec<(String, Vec<f64>)> = Vec::new();
     let mut dyn_sum = (0.0, 0u32); // mean dynamic fraction over the steps the MLP ran in
+    let mut split_seen = None;
     let mut log_file = std::fs::OpenOptions::new()
         .append(true)
         .open(&log_path)
@@ -324,10 +332,35 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         let t0 = Instant::now();
         let info = tr.step(log, log && a.verbose)?;
         step_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-        if tr.plan(tr.iteration).deform_active {
+        let done = tr.plan(tr.iteration);
+        let phase = match (done.deform_active, done.sparse) {
+            (false, _) => "no MLP",
+            (true, false) => "MLP over all",
+            (true, true) => "MLP over dynamic",
+        };
+        let phase = format!(
+            "{phase}{}",
+            if done.motion.is_some() {
+                " + motion"
+            } else {
+                ""
+            }
+        );
+        let ms = *step_ms.last().expect("timed");
+        match phase_ms.iter_mut().find(|p| p.0 == phase) {
+            Some(p) => p.1.push(ms),
+            None => phase_ms.push((phase, vec![ms])),
+        }
+        if done.deform_active {
             dyn_sum = (dyn_sum.0 + tr.dynamic_fraction(), dyn_sum.1 + 1);
         }
         pb.set_position(tr.iteration as u64);
+        if tr.last_split.map(|s| s.0) != split_seen {
+            split_seen = tr.last_split.map(|s| s.0);
+            if let Some((it, s)) = tr.last_split {
+                pb.suspend(|| eprintln!("split after iteration {it}: {s}"));
+            }
+        }
         if let Some(l) = info {
             if !l.loss.loss.is_finite() {
                 return Err(Error::Invalid(format!(
@@ -399,13 +432,13 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
             save_side_by_side(&path, im.width, im.height, &[&im.render, &im.gt])?;
         }
     }
+    write_dynamic_masks(&mut tr, &renders.join("dynamic"))?;
     write_ply(&out.join("point_cloud.ply"), &tr.gaussians()?)?;
     let mlp = tr.model.deform.download(&gpu)?;
     write_atomic(&out.join("deform.bin"), bytemuck::cast_slice(&mlp))?;
     let dynamic_bin = out.join("dynamic.bin");
     match tr.model.dynamic.download(&gpu, tr.n())? {
-        // One byte per Gaussian of point_cloud.ply, 1 = dynamic; absent = all dynamic.
-        Some(f) => write_atomic(&dynamic_bin, &f.iter().map(|&v| v as u8).collect::<Vec<u8>>())?,
+        Some(d) => write_atomic(&dynamic_bin, &crate::eval::run::dynamic_bin(&d))?,
         None if dynamic_bin.is_file() => {
             std::fs::remove_file(&dynamic_bin).map_err(io(&dynamic_bin))?
         }
@@ -422,8 +455,17 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     let mut metrics = Report::new(&cfg, ctx, per);
     metrics.initial_psnr = initial_psnr;
     // None when no step ran (a resumed run that had already finished).
-    metrics.ms_per_step = (!step_ms.is_empty()).then(|| crate::bench::median(step_ms));
+    metrics.ms_per_step = (!step_ms.is_empty()).then(|| crate::bench::median(step_ms.clone()));
     metrics.dynamic_fraction = Some(tr.dynamic_fraction());
+    metrics.train_seconds = Some(step_ms.iter().sum::<f64>() / 1e3);
+    metrics.ms_per_step_by_phase = phase_ms
+        .into_iter()
+        .map(|(phase, v)| crate::eval::report::PhaseMs {
+            phase,
+            steps: v.len() as u32,
+            median_ms: crate::bench::median(v),
+        })
+        .collect();
     metrics.mean_dynamic_fraction = (dyn_sum.1 > 0).then(|| dyn_sum.0 / dyn_sum.1 as f64);
     write_atomic(&out.join("metrics.json"), metrics.to_json().as_bytes())?;
     let fmt = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.4}"));
@@ -555,6 +597,25 @@ fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
         }
     }
     write_atomic(path, keep.as_bytes())
+}
+
+/// `renders/dynamic/<frame>.png` per test frame: where the render sees dynamic Gaussians
+/// (white) beside the ground-truth motion mask when the dataset has one.
+pub fn write_dynamic_masks(tr: &mut Trainer, dir: &Path) -> Result<()> {
+    for i in 0..tr.val.len() {
+        let (cam, t, id) = (tr.val[i].camera, tr.val[i].time, tr.val[i].id.clone());
+        let m = tr.dynamic_mask(&cam, t)?;
+        let gray = |v: f32| [v, v, v, 1.0];
+        let mask: Vec<[f32; 4]> = m.iter().map(|&v| gray(v)).collect();
+        let mut images = vec![&mask[..]];
+        let gt: Vec<[f32; 4]>;
+        if let Some((_, host)) = &tr.val[i].mask {
+            gt = host.iter().map(|&b| gray((b != 0) as u8 as f32)).collect();
+            images.push(&gt);
+        }
+        save_side_by_side(&dir.join(frame_png(i, &id)), cam.width, cam.height, &images)?;
+    }
+    Ok(())
 }
 
 /// Writes images (RGBA f32, alpha ignored) side by side as one 8-bit PNG.

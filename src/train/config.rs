@@ -178,8 +178,12 @@ pub enum SparsityMode {
 pub struct SparsityConfig {
     pub mode: SparsityMode,
     /// Largest motion D may give a static Gaussian, in pixels of the training view where it
-    /// looks largest, at any probed time.
+    /// looks largest, at any probed time ...
     pub threshold_px: f32,
+    /// ... or this multiple of the median Gaussian's, when larger (the MLP moves every
+    /// Gaussian a little; real motion stands out from that floor). 0 = the absolute
+    /// threshold alone.
+    pub noise_k: f32,
     /// Times D is probed at (evenly over the training frames' time range).
     pub probe_times: u32,
     pub start: f32,
@@ -192,6 +196,7 @@ impl Default for SparsityConfig {
         SparsityConfig {
             mode: SparsityMode::Auto,
             threshold_px: 0.5,
+            noise_k: 3.0,
             probe_times: 8,
             start: 0.25,
             every: 0.25,
@@ -484,6 +489,7 @@ impl TrainConfig {
         }
         let sp = &self.sparsity;
         non_negative("sparsity.threshold_px", sp.threshold_px as f64)?;
+        non_negative("sparsity.noise_k", sp.noise_k as f64)?;
         at_least_1("sparsity.probe_times", sp.probe_times)?;
         unit("sparsity.start", sp.start as f64)?;
         unit("sparsity.dense_window", sp.dense_window as f64)?;

@@ -29,7 +29,7 @@ use checkpoint::Checkpoint;
 use config::{DeformMode, MotionFlow, MotionOrder, NormGrad, SparsityMode, TrainConfig};
 use frames::GpuFrame;
 use passes::motion::{OpticalFlow, OracleFlow};
-use passes::sparsity::{Classifier, ProbeConfig};
+use passes::sparsity::{Classifier, ProbeConfig, SplitStats};
 use passes::{
     AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass,
     SceneMotion, StepSizes,
@@ -68,6 +68,8 @@ pub struct Trainer<'g> {
     eval: Option<Evaluator>,
     /// Iterations completed.
     pub iteration: u32,
+    /// The last classification: after which iteration, what it found.
+    pub last_split: Option<(u32, SplitStats)>,
 }
 
 impl<'g> Trainer<'g> {
@@ -129,6 +131,7 @@ impl<'g> Trainer<'g> {
             passes: None,
             eval: None,
             iteration: 0,
+            last_split: None,
         })
     }
 
@@ -231,16 +234,17 @@ impl<'g> Trainer<'g> {
         Ok(())
     }
 
-    /// Splits the model into dynamic and static Gaussians now (the motion probe); returns the
-    /// dynamic count. A no-op returning the live count without a probe (sparsity off or the
-    /// deformation off).
-    pub fn classify(&mut self) -> Result<u32> {
+    /// Splits the model into dynamic and static Gaussians now (the motion probe). `None`
+    /// without a probe (sparsity off or the deformation off).
+    pub fn classify(&mut self) -> Result<Option<SplitStats>> {
         self.passes()?;
         let s = self.passes.as_ref().expect("built");
-        match &s.classifier {
-            Some(c) => c.classify(self.gpu, &mut self.model, &s.deform),
-            None => Ok(self.n()),
-        }
+        let Some(c) = &s.classifier else {
+            return Ok(None);
+        };
+        let stats = c.classify(self.gpu, &mut self.model, &s.deform)?;
+        self.last_split = Some((self.iteration, stats));
+        Ok(Some(stats))
     }
 
     /// Fraction of the live Gaussians the deformation runs over (1 while dense).
@@ -306,6 +310,15 @@ impl<'g> Trainer<'g> {
         self.evaluator()?;
         let e = self.eval.as_mut().expect("built");
         e.view(gpu, &self.model, view, camera, t, prev)
+    }
+
+    /// Each pixel's blend weight on dynamic Gaussians at view `(camera, t)` ([H·W]).
+    pub fn dynamic_mask(&mut self, camera: &Camera, t: f32) -> Result<Vec<f32>> {
+        let view = self.view();
+        let gpu = self.gpu;
+        self.evaluator()?;
+        let e = self.eval.as_mut().expect("built");
+        e.dynamic_mask(gpu, &self.model, view, camera, t)
     }
 
     /// The Gaussians as drawn at time `t` (a standard 3DGS model of that instant).
@@ -442,8 +455,12 @@ fn classifier(
         return Ok(None);
     }
     let lo = times.times.iter().copied().fold(f32::INFINITY, f32::min);
-    let hi = times.times.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-    let probe = ProbeConfig::even(sp.threshold_px, sp.probe_times, lo, hi);
+    let hi = times
+        .times
+        .iter()
+        .copied()
+        .fold(f32::NEG_INFINITY, f32::max);
+    let probe = ProbeConfig::even(sp.threshold_px, sp.noise_k, sp.probe_times, lo, hi);
     let cams: Vec<Camera> = frames.iter().map(|f| f.camera).collect();
     Classifier::new(gpu, sizes.capacity, &cams, probe).map(Some)
 }

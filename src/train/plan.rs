@@ -222,8 +222,15 @@ pub fn sparsity_at(cfg: &TrainConfig, it: u32) -> (bool, bool) {
         return (false, false);
     }
     let phase = (it - s0) % period;
-    let dense = it == s0 || (window > 0 && (phase == 0 || phase > period - window));
-    (!dense, phase == 0)
+    // A window that would not end (with its re-split) by the last iteration is skipped, so a
+    // run never ends dense after its first split.
+    let window_end = it + (period - phase) % period;
+    let in_window = window > 0 && (phase == 0 || phase > period - window);
+    let dense = it == s0 || (in_window && window_end <= cfg.iterations);
+    (
+        !dense,
+        phase == 0 && (it == s0 || window_end <= cfg.iterations),
+    )
 }
 
 /// α_t of the motion term at 1-based `iteration`: 0 before `motion_start` (or during the
@@ -431,6 +438,12 @@ mod tests {
         }
         assert_eq!(at(&c, 60), (false, true));
         assert_eq!(at(&c, 61), (true, false));
+        // The window of 100 (97..=100) ends with the run: dense, split after the last step;
+        // a run of 98 iterations skips it and ends on the split.
+        assert_eq!(at(&c, 100), (false, true));
+        let mut short = c.clone();
+        short.iterations = 98;
+        assert!(sparsity_at(&short, 97).0);
         c.sparsity.mode = SparsityMode::Off;
         assert!((1..=100).all(|it| at(&c, it) == (false, false)));
         let mut d = cfg();

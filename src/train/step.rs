@@ -2,10 +2,10 @@
 //! step, with the DispFlow-GS motion term in the `if let Some(..)` blocks.
 
 use super::frames::GpuFrame;
+use super::passes::sparsity::Classifier;
 use super::passes::{
     AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass, Slot,
 };
-use super::passes::sparsity::Classifier;
 use super::plan::StepPlan;
 use crate::kernels::raster::{OutputGrads, RenderOpts, SplatInputs};
 use crate::model::state::Model;

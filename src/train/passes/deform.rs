@@ -3,8 +3,9 @@
 //!
 //! When the model is split into dynamic and static Gaussians (`model.dynamic`), the MLP runs
 //! over the dynamic rows only: their means are gathered into a compact batch, the MLP's
-//! compact output is expanded back into Gaussian order with exact zeros for the static ones
-//! (so the composition, δ and everything downstream are unchanged), and the backward gathers
+//! compact output is expanded back into Gaussian order with the static ones' constant
+//! deformation in between (so the composition, δ and everything downstream are unchanged,
+//! and a static Gaussian's δ is exactly 0), and the backward gathers
 //! the output gradients of the same rows. The dense path is the code that ran before.
 
 use super::{row, StepSizes};
@@ -108,7 +109,8 @@ impl DeformPass {
     }
 
     /// D(·, t) by the MLP into slot `k` (the MLP sees the canonical means, detached): over
-    /// the dynamic rows when the model is split (zeros for the static ones), else over all.
+    /// the dynamic rows when the model is split (the static ones get their constant row),
+    /// else over all.
     pub fn mlp_forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32) {
         let (g, s, dynamic) = (&model.gaussians, self.slot(k), &model.dynamic);
         let means = g.param(Section::Means);
@@ -126,8 +128,10 @@ impl DeformPass {
             let out = s.compact_out.all();
             self.mlp.forward(rec, &s.mlp, count, xyz, time, params, out);
         }
-        let (row_of, out) = (dynamic.row_of(), s.compact_out.all());
-        self.rows.expand(rec, g.n, 10, row_of, out, s.out.all());
+        let (row_of, out, fixed) = (dynamic.row_of(), s.compact_out.all(), dynamic.fixed());
+        let width = row::DEFORM as u32;
+        self.rows
+            .expand(rec, g.n, width, row_of, out, fixed, s.out.all());
     }
 
     /// Composes the canonical Gaussians with slot `k`'s MLP output (`deformed`) or with D ≡ 0.
@@ -180,7 +184,8 @@ impl DeformPass {
             Some(count) => {
                 let c = s.compact_d_out.as_ref().expect("a backward pass").all();
                 let src = self.output_grad(k);
-                self.rows.gather(rec, count, 10, dynamic.idx(), src, c);
+                let width = row::DEFORM as u32;
+                self.rows.gather(rec, count, width, dynamic.idx(), src, c);
                 (count, c)
             }
         };
