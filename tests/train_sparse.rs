@@ -10,6 +10,7 @@ mod train_common;
 use dispflow_vk::data::synthetic::{self, Preset, SceneMotion};
 use dispflow_vk::data::{self, Dataset, LoadOptions};
 use dispflow_vk::testing;
+use dispflow_vk::train::config::SparsityMode;
 use dispflow_vk::train::Trainer;
 use train_common::tiny_config;
 
@@ -36,7 +37,9 @@ fn static_scene_splits_static_with_zero_displacement_flow() {
     let ds = scene(tmp.path(), SceneMotion::Static);
     let gpu = testing::gpu();
     let mut cfg = tiny_config(300);
+    cfg.sparsity.mode = SparsityMode::Auto;
     cfg.sparsity.start = 0.0; // first split right after the first deformation step
+    cfg.motion_start = 160; // the DispFlow term is on (α = 0.1) from then
     let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
     run_to(&mut tr, cfg.warm_up + 1);
     let first = tr
@@ -55,6 +58,16 @@ fn static_scene_splits_static_with_zero_displacement_flow() {
     let frac = tr.dynamic_fraction();
     assert!(frac < 0.02, "static scene: {:.1} % dynamic", 100.0 * frac);
     assert!(tr.plan(tr.iteration).sparse, "the run ends split");
+    let ran = tr.last_plan.expect("a step ran");
+    assert!(
+        tr.plan(tr.iteration).motion.is_some(),
+        "the plan has the motion term"
+    );
+    assert_eq!(
+        ran.motion.is_none(),
+        tr.model.dynamic.split() == Some(0),
+        "the motion term is skipped exactly when nothing is dynamic"
+    );
     // Where the render sees only static Gaussians, the displacement flow between two test
     // times is exactly zero (not small: the static rows are one constant).
     let (cam, t) = (tr.val[1].camera, tr.val[1].time);

@@ -5,12 +5,12 @@
 //! which), so this isolates the speed side of the sparsity knob from training.
 
 use super::median;
-use super::step::{median_zones, scenes, time_interleaved, StepRow};
+use super::step::{median_zones, scenes, time_interleaved, timed_config, StepRow};
 use crate::data;
 use crate::error::Result;
 use crate::model::dynamic::SplitSnapshot;
 use crate::train::cli::load_options;
-use crate::train::config::{Preset, SparsityMode, TrainConfig};
+use crate::train::config::SparsityMode;
 use crate::train::plan::hash_uniform;
 use crate::train::Trainer;
 use crate::vk::{Gpu, Timings};
@@ -29,13 +29,8 @@ pub fn run_sparsity_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRo
     let mut rows = Vec::new();
     for (scene, dir) in scenes()? {
         for (method, weight) in [("baseline", 0.0f32), ("DispFlow", 0.1)] {
-            let mut cfg = TrainConfig::preset(Preset::Fast);
-            // Deformation and motion term from the first step, no densification; the split
-            // (made after step 1) stays for the rest of the run.
-            cfg.warm_up = 0;
-            cfg.motion_start = 0;
-            cfg.motion_weight = weight;
-            cfg.densify.from = u32::MAX;
+            // The split (made after step 1) stays for the rest of the run.
+            let mut cfg = timed_config(weight);
             cfg.sparsity.start = 0.0;
             cfg.sparsity.every = 1.0;
             cfg.sparsity.dense_window = 0.0;
@@ -43,9 +38,10 @@ pub fn run_sparsity_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRo
             let mut trainers = Vec::new();
             for (_, frac) in SPLITS {
                 let mut c = cfg.clone();
-                if frac.is_none() {
-                    c.sparsity.mode = SparsityMode::Off;
-                }
+                c.sparsity.mode = match frac {
+                    None => SparsityMode::Off,
+                    Some(_) => SparsityMode::Auto,
+                };
                 let mut tr = Trainer::new(gpu, &c, &data)?;
                 tr.step(false, false)?;
                 if let Some(f) = frac {

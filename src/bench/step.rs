@@ -10,7 +10,7 @@ use crate::data::{self, synthetic::Preset as ScenePreset};
 use crate::error::Result;
 use crate::kernels::mlp_fused::FmaPeak;
 use crate::train::cli::{builtin_scene, load_options};
-use crate::train::config::{Preset, SparsityMode, TrainConfig};
+use crate::train::config::{Preset, TrainConfig};
 use crate::train::Trainer;
 use crate::vk::{Gpu, Recorder, Timings};
 
@@ -112,19 +112,23 @@ pub(crate) fn scenes() -> Result<Vec<(String, PathBuf)>> {
     Ok(v)
 }
 
+/// The fast preset with the deformation and the motion term (weight `weight`) on from the
+/// first step and densification off, so every timed step does the same work.
+pub(crate) fn timed_config(weight: f32) -> TrainConfig {
+    let mut cfg = TrainConfig::preset(Preset::Fast);
+    cfg.warm_up = 0;
+    cfg.motion_start = 0;
+    cfg.motion_weight = weight;
+    cfg.densify.from = u32::MAX;
+    cfg
+}
+
 /// Times `steps` steps (after `warm`) of each scene × method × kernel set.
 pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> {
     let mut rows = Vec::new();
     for (scene, dir) in scenes()? {
         for (method, weight) in [("baseline", 0.0f32), ("DispFlow", 0.1)] {
-            let mut cfg = TrainConfig::preset(Preset::Fast);
-            // The deformation and the motion term on from the first step, densification off,
-            // so every timed step does the same work.
-            cfg.warm_up = 0;
-            cfg.motion_start = 0;
-            cfg.motion_weight = weight;
-            cfg.densify.from = u32::MAX;
-            cfg.sparsity.mode = SparsityMode::Off; // kernels, not the split: `bench sparsity`
+            let cfg = timed_config(weight);
             let data = data::load(&dir, &load_options(&cfg))?;
             let mut trainers = Vec::new();
             for k in KERNEL_SETS {

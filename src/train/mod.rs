@@ -70,6 +70,8 @@ pub struct Trainer<'g> {
     pub iteration: u32,
     /// The last classification: after which iteration, what it found.
     pub last_split: Option<(u32, SplitStats)>,
+    /// What the last step ran (its plan, less a motion term skipped because nothing moved).
+    pub last_plan: Option<StepPlan>,
 }
 
 impl<'g> Trainer<'g> {
@@ -132,6 +134,7 @@ impl<'g> Trainer<'g> {
             eval: None,
             iteration: 0,
             last_split: None,
+            last_plan: None,
         })
     }
 
@@ -170,7 +173,12 @@ impl<'g> Trainer<'g> {
     /// submit, never mid-step). An iteration whose tile intersections overflowed is discarded
     /// on the GPU (the optimiser skips it) and re-run with grown buffers.
     pub fn step(&mut self, want_values: bool, timed: bool) -> Result<Option<StepLog>> {
-        let p = self.plan(self.iteration + 1);
+        let mut p = self.plan(self.iteration + 1);
+        if p.sparse && self.model.dynamic.split() == Some(0) {
+            // Nothing moves: δ ≡ 0, the displacement flow is zero and the motion term has no
+            // gradient for anything (the GPU would skip it as degenerate); skip its work too.
+            p.motion = None;
+        }
         loop {
             let mut rec = if timed {
                 Recorder::timed(self.gpu)?
@@ -205,6 +213,7 @@ impl<'g> Trainer<'g> {
                 continue;
             }
             self.iteration = p.iteration;
+            self.last_plan = Some(p);
             self.densify_if_due(&p)?;
             if p.classify {
                 self.classify()?;

@@ -427,6 +427,9 @@ mod tests {
         let (mut c, f) = (cfg(), frames());
         // warm-up 20 of 100: span 80, first split after 20 + 20 = 40, period 20, window 4.
         c.densify.until = 0;
+        assert_eq!(c.sparsity.mode, SparsityMode::Off, "off unless asked");
+        assert!((1..=100).all(|it| sparsity_at(&c, it) == (false, false)));
+        c.sparsity.mode = SparsityMode::Auto;
         let at = |c: &TrainConfig, it| sparsity_at(c, it);
         assert_eq!(at(&c, 20), (false, false), "warm-up: no MLP, no split");
         assert_eq!(at(&c, 39), (false, false));
@@ -447,6 +450,7 @@ mod tests {
         c.sparsity.mode = SparsityMode::Off;
         assert!((1..=100).all(|it| at(&c, it) == (false, false)));
         let mut d = cfg();
+        d.sparsity.mode = SparsityMode::Auto;
         d.deform = DeformMode::Off;
         d.motion_weight = 0.0;
         assert!((1..=100).all(|it| at(&d, it) == (false, false)));
@@ -454,6 +458,7 @@ mod tests {
         assert!((1..=100).all(|it| StepPlan::at(&d, &f, it).lr.deform.is_none()));
         // A densification inside a sparse stretch re-splits at once.
         let mut e = cfg();
+        e.sparsity.mode = SparsityMode::Auto;
         e.densify.from = 0;
         e.densify.until = 100;
         e.densify.interval = 50;
