@@ -171,9 +171,16 @@ fn metrics(out: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(out.join("metrics.json")).unwrap();
     let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
     let o = m.as_object_mut().unwrap();
-    // Where and how fast it ran, and the initial PSNR (measured only by a run that starts at
-    // iteration 0) are not results of the training.
-    for k in ["run", "ms_per_step", "initial_psnr"] {
+    // Where and how fast it ran, what its last launch did, and the initial PSNR (measured
+    // only by a run that starts at iteration 0) are not results of the training.
+    for k in [
+        "run",
+        "ms_per_step",
+        "ms_per_step_by_phase",
+        "train_seconds",
+        "mean_dynamic_fraction",
+        "initial_psnr",
+    ] {
         o.remove(k);
     }
     m
@@ -296,6 +303,7 @@ fn sigkilled_runs_resume_to_the_uninterrupted_result() {
             "psnr",
             "num_gaussians",
             "motion_weight",
+            "dynamic_fraction",
         ] {
             assert_eq!(
                 x[k], y[k],

@@ -3,8 +3,8 @@
 use dispflow_vk::model::gaussians::HostGaussians;
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::{read_ply, write_ply};
-use dispflow_vk::train::cli::{resolve_config, TrainArgs};
-use dispflow_vk::train::config::TrainConfig;
+use dispflow_vk::train::cli::{default_preset, resolve_config, resolve_config_on, TrainArgs};
+use dispflow_vk::train::config::{Preset, TrainConfig};
 use dispflow_vk::train::Trainer;
 use train_common::{tiny_config, tiny_dataset, tiny_scene};
 
@@ -119,6 +119,15 @@ fn config_rejects_unknown_fields_and_bad_values() {
     a.mlp_width = Some(16);
     let r = resolve_config(&a).unwrap();
     assert_eq!((r.iterations, r.mlp_width, r.densify.until), (123, 16, 123));
+    // Without --preset: fast for the built-in scene or on a CPU device, paper for a dataset
+    // on a GPU; --preset always wins.
+    let mut d = args();
+    d.data = Some("some/dataset".into());
+    assert_eq!(resolve_config_on(&d, false).unwrap().iterations, 20_000);
+    assert_eq!(resolve_config_on(&d, true).unwrap().iterations, 600);
+    assert_eq!(default_preset(&args(), false).0, Preset::Fast);
+    d.preset = Some(Preset::Paper);
+    assert_eq!(resolve_config_on(&d, true).unwrap().iterations, 20_000);
 }
 
 #[test]

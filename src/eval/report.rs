@@ -41,13 +41,15 @@ pub struct Report {
     /// Fraction of the Gaussians the deformation moves at the end (1 = dense model).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dynamic_fraction: Option<f64>,
-    /// Mean dynamic fraction over the training steps that ran the MLP (`train` only).
+    /// Mean dynamic fraction over the last launch's training steps that ran the MLP (`train`
+    /// only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mean_dynamic_fraction: Option<f64>,
-    /// Median wall ms per step by what the step ran (`train` only; empty otherwise).
+    /// Median wall ms per step of the last launch by what the step ran (`train` only).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub ms_per_step_by_phase: Vec<PhaseMs>,
-    /// Wall seconds of all training steps of the last launch (`train` only).
+    /// Wall seconds of the last launch's training steps (`train` only; `log.jsonl`'s `wall_s`
+    /// counts across resumes).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub train_seconds: Option<f64>,
     pub per_frame: Vec<FrameEval>,

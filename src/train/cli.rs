@@ -3,10 +3,10 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use serde::Serialize;
-
 use super::checkpoint::{last_checkpoint, write_atomic, write_ply, Checkpoint};
 use super::config::{Background, Preset, TrainConfig};
+use super::outputs::{last_wall_s, remove_stale_outputs, truncate_log};
+pub use super::outputs::{save_side_by_side, write_dynamic_masks, LogLine};
 use super::Trainer;
 use crate::data::synthetic::{self, Preset as ScenePreset};
 use crate::data::{self, LoadOptions};
@@ -24,7 +24,8 @@ pub struct TrainArgs {
     /// Output directory. Default: runs/<dataset name>.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Starting configuration. Default: `fast` for the built-in scene, `paper` with --data.
+    /// Starting configuration. Default: `fast` for the built-in scene or on a CPU device
+    /// (lavapipe), `paper` with --data on a GPU; the run prints which and why.
     #[arg(long, value_enum)]
     pub preset: Option<Preset>,
     /// TOML file overriding fields of the preset (same names as the run's config.toml).
@@ -126,27 +127,6 @@ pub fn load_options(cfg: &TrainConfig) -> LoadOptions {
     }
 }
 
-/// One line of a run's `log.jsonl` (every `log_interval` iterations).
-#[derive(Debug, Serialize, serde::Deserialize)]
-pub struct LogLine {
-    pub iteration: u32,
-    pub loss: f64,
-    /// PSNR of the training view of that iteration.
-    pub psnr: f64,
-    pub num_gaussians: u32,
-    /// Motion weight α_t in force (0 before the motion term starts).
-    pub motion_weight: f32,
-    /// GPU milliseconds of the step (only with --verbose, else wall milliseconds).
-    pub ms: f64,
-    /// Fraction of the Gaussians the deformation runs over (1 while dense).
-    #[serde(default = "one")]
-    pub dynamic_fraction: f64,
-}
-
-fn one() -> f64 {
-    1.0
-}
-
 /// Where the built-in scene is cached: `$XDG_CACHE_HOME` or `~/.cache`, else `./.cache`.
 pub fn cache_dir() -> PathBuf {
     let base = std::env::var_os("XDG_CACHE_HOME")
@@ -178,13 +158,29 @@ pub fn builtin_scene(preset: ScenePreset, seed: u64) -> Result<PathBuf> {
     Ok(dir)
 }
 
-/// Resolves flags over the preset and the optional TOML file.
+/// The preset a run without `--preset` starts from, and why: `fast` for the built-in scene or
+/// on a CPU device (the paper's 20 000 iterations take hours there), `paper` otherwise.
+pub fn default_preset(a: &TrainArgs, cpu_device: bool) -> (Preset, &'static str) {
+    match (&a.data, cpu_device) {
+        (None, _) => (Preset::Fast, "the built-in scene"),
+        (Some(_), true) => (
+            Preset::Fast,
+            "a CPU device: the paper's 20 000 iterations would take hours; --preset paper to \
+             insist",
+        ),
+        (Some(_), false) => (Preset::Paper, "a dataset on a GPU"),
+    }
+}
+
+/// Resolves flags over the preset and the optional TOML file (as on a GPU device).
 pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
-    let preset = a.preset.unwrap_or(if a.data.is_none() {
-        Preset::Fast
-    } else {
-        Preset::Paper
-    });
+    resolve_config_on(a, false)
+}
+
+/// Resolves flags over the preset (`--preset`, else [`default_preset`] for the device) and
+/// the optional TOML file.
+pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig> {
+    let preset = a.preset.unwrap_or(default_preset(a, cpu_device).0);
     let mut c = TrainConfig::preset(preset);
     if let Some(p) = &a.config {
         c = TrainConfig::from_toml_over(&c, p)?;
@@ -229,7 +225,15 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
 
 /// The whole `train` command. Returns the metrics it wrote.
 pub fn run(a: &TrainArgs) -> Result<Report> {
-    let cfg = resolve_config(a)?;
+    // Flags and configuration files are checked before the device is opened.
+    resolve_config(a)?;
+    let gpu = Gpu::new_default()?;
+    let cpu = gpu.info.kind == "CPU";
+    let cfg = resolve_config_on(a, cpu)?;
+    if a.preset.is_none() {
+        let (p, why) = default_preset(a, cpu);
+        eprintln!("preset: {} ({why})", format!("{p:?}").to_lowercase());
+    }
     let data_dir = match &a.data {
         Some(d) => d.clone(),
         None => builtin_scene(ScenePreset::Small, 0)?,
@@ -243,7 +247,6 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(&name));
     let dataset = data::load(&data_dir, &load_options(&cfg))?;
-    let gpu = Gpu::new_default()?;
     eprintln!("device: {}", gpu.info);
     let mut tr = Trainer::new(&gpu, &cfg, &dataset).map_err(|e| match e {
         Error::Alloc { .. }
@@ -323,6 +326,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     // Wall ms per step by what the step ran (in first-seen order).
     let mut phase_ms: Vec<(String, Vec<f64>)> = Vec::new();
     let mut dyn_sum = (0.0, 0u32); // mean dynamic fraction over the steps the MLP ran in
+    let wall_before = if resume { last_wall_s(&log_path) } else { 0.0 };
     let mut split_seen = None;
     let mut log_file = std::fs::OpenOptions::new()
         .append(true)
@@ -390,6 +394,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
                     *step_ms.last().expect("timed")
                 },
                 dynamic_fraction: dynamic,
+                wall_s: wall_before + step_ms.iter().sum::<f64>() / 1e3,
             };
             let text = serde_json::to_string(&line).expect("log line serialises");
             std::io::Write::write_all(&mut log_file, format!("{text}\n").as_bytes())
@@ -551,80 +556,4 @@ fn flatten(prefix: &str, v: &toml::Value, out: &mut Vec<(String, String)>) {
         }
         v => out.push((prefix.to_string(), v.to_string())),
     }
-}
-
-/// Before training: removes what a killed run can leave behind (`*.tmp` files of interrupted
-/// atomic writes) and `metrics.json`, the mark of a finished run, which is written again
-/// last, so a run killed from here on never looks finished.
-fn remove_stale_outputs(out: &Path) -> Result<()> {
-    for dir in [
-        out.to_path_buf(),
-        out.join("checkpoints"),
-        out.join("renders"),
-    ] {
-        let Ok(entries) = std::fs::read_dir(&dir) else {
-            continue;
-        };
-        for e in entries.flatten() {
-            let p = e.path();
-            if p.extension().is_some_and(|x| x == "tmp") && p.is_file() {
-                std::fs::remove_file(&p).map_err(io(&p))?;
-            }
-        }
-    }
-    let m = out.join("metrics.json");
-    if m.is_file() {
-        std::fs::remove_file(&m).map_err(io(&m))?;
-    }
-    Ok(())
-}
-
-/// Keeps the lines of a run's `log.jsonl` up to `iteration` (the checkpoint a run resumes
-/// from): the resumed run logs the later iterations again, and a line cut short by a kill is
-/// dropped. A missing log is created empty.
-fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
-    let bytes = match std::fs::read(path) {
-        Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-        Err(e) => return Err(io(path)(e)),
-    };
-    let text = String::from_utf8_lossy(&bytes);
-    let mut keep = String::new();
-    for line in text.split_inclusive('\n') {
-        let whole = line.ends_with('\n');
-        match serde_json::from_str::<LogLine>(line.trim()) {
-            Ok(l) if whole && l.iteration <= iteration => keep.push_str(line),
-            _ => break,
-        }
-    }
-    write_atomic(path, keep.as_bytes())
-}
-
-/// `renders/dynamic/<frame>.png` per test frame: where the render sees dynamic Gaussians
-/// (white) beside the ground-truth motion mask when the dataset has one.
-pub fn write_dynamic_masks(tr: &mut Trainer, dir: &Path) -> Result<()> {
-    for i in 0..tr.val.len() {
-        let (cam, t, id) = (tr.val[i].camera, tr.val[i].time, tr.val[i].id.clone());
-        let m = tr.dynamic_mask(&cam, t)?;
-        let gray = |v: f32| [v, v, v, 1.0];
-        let mask: Vec<[f32; 4]> = m.iter().map(|&v| gray(v)).collect();
-        let mut images = vec![&mask[..]];
-        let gt: Vec<[f32; 4]>;
-        if let Some((_, host)) = &tr.val[i].mask {
-            gt = host.iter().map(|&b| gray((b != 0) as u8 as f32)).collect();
-            images.push(&gt);
-        }
-        save_side_by_side(&dir.join(frame_png(i, &id)), cam.width, cam.height, &images)?;
-    }
-    Ok(())
-}
-
-/// Writes images (RGBA f32, alpha ignored) side by side as one 8-bit PNG.
-pub fn save_side_by_side(path: &Path, w: u32, h: u32, images: &[&[[f32; 4]]]) -> Result<()> {
-    let k = images.len() as u32;
-    let img = image::RgbImage::from_fn(w * k, h, |x, y| {
-        let p = images[(x / w) as usize][(y * w + x % w) as usize];
-        image::Rgb([0, 1, 2].map(|c| (p[c].clamp(0.0, 1.0) * 255.0).round() as u8))
-    });
-    crate::report::save_png(&img, path)
 }

@@ -7,6 +7,7 @@ pub mod checkpoint;
 pub mod cli;
 pub mod config;
 pub mod frames;
+pub mod outputs;
 pub mod passes;
 pub mod plan;
 pub mod step;
