@@ -163,12 +163,12 @@ fn eval_and_render_a_tiny_run() {
     assert!(combined.rows[1][0].starts_with("Deformable-3DGS"));
 
     // Pictures: one strip per test frame (render, gt, error, displacement flow, optical flow,
-    // mask: 6 panels of 64×64
+    // mask, dynamic mask: 7 panels of 64×64
     // with 2-px gaps under a 12-px label band), the per-frame and training plots.
     let strips = pngs(&motion.join("eval/frames"));
     assert_eq!(strips.len(), n_val);
     for p in &strips {
-        assert_eq!(png_size(p), (6 * 64 + 5 * 2, 64 + 12), "{}", p.display());
+        assert_eq!(png_size(p), (7 * 64 + 6 * 2, 64 + 12), "{}", p.display());
     }
     assert_eq!(png_size(&motion.join("eval/per_frame.png")), (640, 480));
     assert_eq!(png_size(&motion.join("eval/training.png")), (640, 600));
@@ -189,7 +189,7 @@ fn eval_and_render_a_tiny_run() {
     .unwrap();
     assert_eq!(written.len(), n_val);
     for p in &written {
-        assert_eq!(png_size(p), (2 * 64 + 2, 64 + 12));
+        assert_eq!(png_size(p), (3 * 64 + 2 * 2, 64 + 12)); // render | flow | dynamic
     }
     let canonical = read_ply(&out.join("ply/canonical.ply")).unwrap();
     assert_eq!(
