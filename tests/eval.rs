@@ -52,6 +52,7 @@ fn eval_args(runs: Vec<PathBuf>) -> EvalArgs {
         data: None,
         lpips_weights: None,
         table: None,
+        curves: None,
         no_pictures: false,
     }
 }
@@ -82,11 +83,29 @@ fn eval_and_render_a_tiny_run() {
     let base = train(&data, &tmp.path().join("baseline"), 0.0);
     let log = std::fs::read_to_string(motion.join("log.jsonl")).unwrap();
     assert_eq!(log.lines().count(), 6, "one log line per 10 iterations");
+    let lines: Vec<serde_json::Value> = log
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    for l in &lines {
+        // The logged view is one of the interval's views, so the worst is at most its PSNR.
+        let (worst, psnr) = (
+            l["worst_psnr"].as_f64().unwrap(),
+            l["psnr"].as_f64().unwrap(),
+        );
+        assert!(worst <= psnr + 1e-9, "{l}");
+        assert!(l["worst_view"].is_string());
+        // The test-PSNR probe runs every test_interval (the fast preset's 50) and at the end.
+        let it = l["iteration"].as_u64().unwrap();
+        assert_eq!(l["test_psnr"].is_number(), it == 50 || it == 60, "{l}");
+    }
 
     // --- eval, two runs, combined table ---
     let table_path = tmp.path().join("combined.md");
     let mut a = eval_args(vec![motion.clone(), base.clone()]);
     a.table = Some(table_path.clone());
+    let curves = tmp.path().join("curves.png");
+    a.curves = Some(curves.clone());
     let reports = run_eval(&a).unwrap();
     assert_eq!(reports.len(), 2);
     let json: serde_json::Value =
@@ -117,6 +136,35 @@ fn eval_and_render_a_tiny_run() {
         assert!(unit(&f["ssim"]) && f["has_mask"].is_boolean());
         assert!(f["drc"].is_null() || unit(&f["drc"]));
     }
+    // The final probe is the mean PSNR of its frames (at most 4, spread over the split) as the
+    // full evaluation measures them.
+    let probes = dispflow_vk::train::curve::probe_frames(n_val);
+    let probe_mean = probes
+        .iter()
+        .map(|&i| json["per_frame"][i]["psnr"].as_f64().unwrap())
+        .sum::<f64>()
+        / probes.len() as f64;
+    let last_probe = lines[5]["test_psnr"].as_f64().unwrap();
+    assert!(
+        (last_probe - probe_mean).abs() < 1e-3,
+        "probe {last_probe} vs eval {probe_mean}"
+    );
+    // time_to_psnr: the first probe at or above each threshold reached.
+    let reached = train_metrics["time_to_psnr"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    for t in &reached {
+        let db = t["psnr_db"].as_f64().unwrap();
+        let first = lines
+            .iter()
+            .find(|l| l["test_psnr"].as_f64().is_some_and(|p| p >= db))
+            .unwrap();
+        assert_eq!(t["iteration"], first["iteration"]);
+        assert_eq!(t["wall_s"], first["wall_s"]);
+    }
+    assert!(png_size(&motion.join("training.png")) == (640, 800));
+    assert_eq!(png_size(&curves), (800, 400));
     let mean_psnr = json["per_frame"]
         .as_array()
         .unwrap()
@@ -171,7 +219,7 @@ fn eval_and_render_a_tiny_run() {
         assert_eq!(png_size(p), (7 * 64 + 6 * 2, 64 + 12), "{}", p.display());
     }
     assert_eq!(png_size(&motion.join("eval/per_frame.png")), (640, 480));
-    assert_eq!(png_size(&motion.join("eval/training.png")), (640, 600));
+    assert_eq!(png_size(&motion.join("eval/training.png")), (640, 800));
 
     // --- render: test path with the flow heatmap and PLY exports ---
     let out = tmp.path().join("render-test");

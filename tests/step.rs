@@ -701,7 +701,7 @@ mod gpu_step {
                 ("sh_rest", read(Section::ShRest)),
                 ("mlp", used.iter().map(|&i| mlp[i] as f64).collect()),
             ],
-            photo_loss: passes.loss.values(gpu).unwrap().loss,
+            photo_loss: passes.loss.values().loss,
         }
     }
 

@@ -174,6 +174,24 @@ impl Evaluator {
         self.evaluate(gpu, model, view, v, want_images)
     }
 
+    /// Photometric values of test frame `f` alone (no motion metrics, no pictures).
+    pub fn photometric(
+        &mut self,
+        gpu: &Gpu,
+        model: &Model,
+        view: ModelView,
+        f: &GpuFrame,
+    ) -> Result<LossValues> {
+        let v = Shot {
+            cam: &f.camera,
+            t: f.time,
+            prev: None,
+            frame: Some(f),
+        };
+        self.evaluate(gpu, model, view, v, false)?;
+        Ok(self.loss.values())
+    }
+
     /// Renders `(camera, t)` (black background) and, with `prev`, the displacement flow since
     /// `prev` (no scores: no ground truth).
     #[allow(clippy::too_many_arguments)] // the view's parts, each one named
@@ -400,7 +418,7 @@ impl Evaluator {
         } = v;
         let px = cam.width as u64 * cam.height as u64;
         let values = match frame {
-            Some(_) => self.loss.values(gpu)?,
+            Some(_) => self.loss.values(),
             None => LossValues::new(f64::NAN, f64::NAN, f64::NAN, self.lambda_ssim as f64),
         };
         let mask = frame.and_then(|f| f.mask.as_ref());

@@ -52,6 +52,10 @@ pub struct Report {
     /// counts across resumes).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub train_seconds: Option<f64>,
+    /// Training seconds until the test-PSNR probe first read each threshold (`train` only;
+    /// from `log.jsonl`, across resumes).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub time_to_psnr: Vec<crate::train::curve::TimeTo>,
     pub per_frame: Vec<FrameEval>,
 }
 
@@ -102,6 +106,7 @@ impl Report {
             mean_dynamic_fraction: None,
             ms_per_step_by_phase: Vec::new(),
             train_seconds: None,
+            time_to_psnr: Vec::new(),
             per_frame: per,
         }
     }

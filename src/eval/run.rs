@@ -248,6 +248,10 @@ pub struct EvalArgs {
     /// Where the combined table of several runs goes [default: print it only].
     #[arg(long)]
     pub table: Option<PathBuf>,
+    /// Where a PNG of every run's test PSNR against training seconds goes (one curve per run,
+    /// from each run's log.jsonl; runs trained before the probe existed have no curve).
+    #[arg(long)]
+    pub curves: Option<PathBuf>,
     /// Skip the PNG strips and plots (metrics and tables only).
     #[arg(long)]
     pub no_pictures: bool,
@@ -280,6 +284,21 @@ pub fn run_eval(a: &EvalArgs) -> Result<Vec<Report>> {
     for run in &runs {
         let r = eval_one(&gpu, run, !a.no_pictures, lpips.as_mut())?;
         reports.push(r);
+    }
+    if let Some(p) = &a.curves {
+        let logs = runs
+            .iter()
+            .map(|r| read_log(&r.dir.join("log.jsonl")))
+            .collect::<Result<Vec<_>>>()?;
+        let labelled: Vec<(String, &[LogLine])> = reports
+            .iter()
+            .zip(&logs)
+            .map(|(r, l)| (format!("{} [{}]", r.method, r.run), &l[..]))
+            .collect();
+        report::save_png(
+            &crate::train::curve::psnr_time_plot(&labelled, 800, 400)?,
+            p,
+        )?;
     }
     let t = table(&reports).to_markdown();
     if let Some(p) = &a.table {
@@ -477,7 +496,9 @@ pub fn read_log(path: &Path) -> Result<Vec<LogLine>> {
         .collect()
 }
 
-fn training_plot(log: &[LogLine]) -> Result<image::RgbImage> {
+/// Loss, training-view PSNR (with the worst view of each interval), Gaussians against
+/// iterations, and the test-PSNR probe against training seconds (when the log has it).
+pub fn training_plot(log: &[LogLine]) -> Result<image::RgbImage> {
     let plot = |title: &str, y: &str, f: &dyn Fn(&LogLine) -> f64, c: usize| Plot {
         title: title.into(),
         x_label: "iteration".into(),
@@ -490,9 +511,29 @@ fn training_plot(log: &[LogLine]) -> Result<image::RgbImage> {
         width: 640,
         height: 200,
     };
-    report::stacked(&[
+    let mut view = plot("training-view PSNR", "PSNR (dB)", &|l| l.psnr, 1);
+    if log.iter().any(|l| l.worst_psnr.is_some()) {
+        view.series[0].label = "logged view".into();
+        view.series.push(Series {
+            label: "worst view of the interval".into(),
+            points: log
+                .iter()
+                .filter_map(|l| l.worst_psnr.map(|p| (l.iteration as f64, p)))
+                .collect(),
+            color: PALETTE[3],
+        });
+    }
+    let mut plots = vec![
         plot("training loss", "loss", &|l| l.loss, 0).render()?,
-        plot("training-view PSNR", "PSNR (dB)", &|l| l.psnr, 1).render()?,
+        view.render()?,
         plot("Gaussians", "count", &|l| l.num_gaussians as f64, 2).render()?,
-    ])
+    ];
+    if log.iter().any(|l| l.test_psnr.is_some()) {
+        plots.push(crate::train::curve::psnr_time_plot(
+            &[(String::new(), log)],
+            640,
+            200,
+        )?);
+    }
+    report::stacked(&plots)
 }

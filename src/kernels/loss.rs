@@ -84,20 +84,24 @@ impl LossBuffers {
 
     /// Reads the partial sums of the last `record` (after its submit) and finishes the values.
     pub fn values(&self, gpu: &Gpu) -> Result<LossValues> {
-        let sums: Vec<[f32; 4]> = gpu.read(self.sums.elems::<[f32; 4]>(0, self.groups() as u64))?;
+        Ok(self.values_of(&gpu.read(self.sums())?))
+    }
+
+    /// The per-workgroup partial sums of the last `record` (to copy to host memory).
+    pub fn sums(&self) -> BufSlice<'_> {
+        self.sums.elems::<[f32; 4]>(0, self.groups() as u64)
+    }
+
+    /// Finishes the values from partial sums read back from [`Self::sums`].
+    pub fn values_of(&self, sums: &[[f32; 4]]) -> LossValues {
         let (mut l1, mut se, mut ss) = (0f64, 0f64, 0f64);
-        for s in &sums {
+        for s in &sums[..self.groups() as usize] {
             l1 += s[0] as f64;
             se += s[1] as f64;
             ss += s[2] as f64;
         }
         let n = 3.0 * (self.width * self.height) as f64;
-        Ok(LossValues::new(
-            l1 / n,
-            se / n,
-            ss / n,
-            self.lambda_ssim as f64,
-        ))
+        LossValues::new(l1 / n, se / n, ss / n, self.lambda_ssim as f64)
     }
 }
 

@@ -31,7 +31,9 @@ pub struct TrainArgs {
     /// TOML file overriding fields of the preset (same names as the run's config.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Training iterations [preset: paper 20000, fast 600].
+    /// Training iterations [preset: paper 20000, fast 600]. The schedule (warm-up, motion
+    /// start, SH growth, densification window, opacity resets, checkpoint and test intervals)
+    /// scales with it in proportion.
     #[arg(long)]
     pub iterations: Option<u32>,
     /// Continue from OUT/checkpoints/last.ckpt when it exists (same configuration).
@@ -186,8 +188,7 @@ pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig>
         c = TrainConfig::from_toml_over(&c, p)?;
     }
     if let Some(v) = a.iterations {
-        c.iterations = v;
-        c.densify.until = c.densify.until.min(v);
+        c = c.with_iterations(v);
     }
     c.max_resolution = a.max_resolution.unwrap_or(c.max_resolution);
     c.sh_degree = a.sh_degree.unwrap_or(c.sh_degree);
@@ -328,15 +329,24 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     let mut dyn_sum = (0.0, 0u32); // mean dynamic fraction over the steps the MLP ran in
     let wall_before = if resume { last_wall_s(&log_path) } else { 0.0 };
     let mut split_seen = None;
+    let probes = super::curve::probe_frames(tr.val.len());
+    let mut worst = super::curve::WorstView::default();
     let mut log_file = std::fs::OpenOptions::new()
         .append(true)
         .open(&log_path)
         .map_err(io(&log_path))?;
     while tr.iteration < cfg.iterations {
-        let log = (tr.iteration + 1) % cfg.log_interval == 0 || tr.iteration + 1 == cfg.iterations;
+        let next = tr.iteration + 1;
+        let test = cfg.test_interval > 0
+            && !probes.is_empty()
+            && (next % cfg.test_interval == 0 || next == cfg.iterations);
+        let log = next % cfg.log_interval == 0 || next == cfg.iterations || test;
         let t0 = Instant::now();
         let info = tr.step(log, log && a.verbose)?;
         step_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        if let Some((v, id)) = tr.last_loss() {
+            worst.see(v.psnr, id);
+        }
         let done = tr.last_plan.expect("a step ran");
         let phase = match (done.deform_active, done.sparse) {
             (false, _) => "no MLP",
@@ -374,10 +384,21 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
                 )));
             }
             let dynamic = tr.dynamic_fraction();
+            // Not counted in the training time: the probe is a measurement, not training.
+            let test_psnr = if test {
+                Some(tr.test_psnr(&probes)?)
+            } else {
+                None
+            };
+            let worst = worst.take();
             let msg = format!(
-                "loss {:.4} psnr {:.2} gaussians {} dynamic {:.0}%",
+                "loss {:.4} psnr {:.2} (worst view {}){} gaussians {} dynamic {:.0}%",
                 l.loss.loss,
                 l.loss.psnr,
+                worst
+                    .as_ref()
+                    .map_or("n/a".into(), |(p, id)| format!("{p:.2} {id}")),
+                test_psnr.map_or(String::new(), |p| format!(" test {p:.2}")),
                 l.num_gaussians,
                 100.0 * dynamic
             );
@@ -395,6 +416,9 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
                 },
                 dynamic_fraction: dynamic,
                 wall_s: wall_before + step_ms.iter().sum::<f64>() / 1e3,
+                test_psnr,
+                worst_psnr: worst.as_ref().map(|w| w.0),
+                worst_view: worst.map(|w| w.1),
             };
             let text = serde_json::to_string(&line).expect("log line serialises");
             std::io::Write::write_all(&mut log_file, format!("{text}\n").as_bytes())
@@ -473,6 +497,12 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         })
         .collect();
     metrics.mean_dynamic_fraction = (dyn_sum.1 > 0).then(|| dyn_sum.0 / dyn_sum.1 as f64);
+    let log = crate::eval::run::read_log(&log_path)?;
+    metrics.time_to_psnr = super::curve::time_to_psnr(&log);
+    crate::report::save_png(
+        &crate::eval::run::training_plot(&log)?,
+        &out.join("training.png"),
+    )?;
     write_atomic(&out.join("metrics.json"), metrics.to_json().as_bytes())?;
     let fmt = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.4}"));
     println!(

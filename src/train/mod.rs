@@ -6,6 +6,7 @@
 pub mod checkpoint;
 pub mod cli;
 pub mod config;
+pub mod curve;
 pub mod frames;
 pub mod outputs;
 pub mod passes;
@@ -222,7 +223,7 @@ impl<'g> Trainer<'g> {
             return Ok(if want_values {
                 Some(StepLog {
                     iteration: p.iteration,
-                    loss: self.passes.as_ref().expect("built").loss.values(self.gpu)?,
+                    loss: self.passes.as_ref().expect("built").loss.values(),
                     num_gaussians: self.n(),
                     timings,
                 })
@@ -292,6 +293,27 @@ impl<'g> Trainer<'g> {
         (0..self.val.len())
             .map(|i| self.evaluate_one(i, want_images))
             .collect()
+    }
+
+    /// Loss values and frame id of the last step (read from host memory after its submit).
+    pub fn last_loss(&self) -> Option<(LossValues, &str)> {
+        let p = self.last_plan?;
+        let s = self.passes.as_ref()?;
+        Some((s.loss.values(), &self.frames[p.frame].id))
+    }
+
+    /// Mean test PSNR over the test frames `which` (render and photometric loss only: the
+    /// cheap probe of the PSNR-vs-time curve).
+    pub fn test_psnr(&mut self, which: &[usize]) -> Result<f64> {
+        let view = self.view();
+        let gpu = self.gpu;
+        self.evaluator()?;
+        let e = self.eval.as_mut().expect("built");
+        let mut sum = 0.0;
+        for &i in which {
+            sum += e.photometric(gpu, &self.model, view, &self.val[i])?.psnr;
+        }
+        Ok(sum / which.len().max(1) as f64)
     }
 
     /// Evaluates test frame `i`.

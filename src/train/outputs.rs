@@ -36,6 +36,14 @@ pub struct LogLine {
     /// Wall seconds of training so far (steps only; a resumed run continues the count).
     #[serde(default)]
     pub wall_s: f64,
+    /// Mean test PSNR of the probe frames (every `test_interval` iterations, else absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_psnr: Option<f64>,
+    /// The worst training-view PSNR since the previous line, and that view's frame id.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_psnr: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_view: Option<String>,
 }
 
 fn one() -> f64 {

@@ -161,13 +161,18 @@ pub struct PhotoLoss {
     loss: PhotometricLoss,
     bufs: LossBuffers,
     d_render: Buffer,
+    /// Host copy of the partial sums, written by every record: the host reads each step's
+    /// values after the submit without another submit (the worst-view check reads them all).
+    host: Buffer,
 }
 
 impl PhotoLoss {
     pub fn new(gpu: &Gpu, s: &StepSizes) -> Result<Self> {
         let loss = PhotometricLoss::new(gpu)?;
+        let bufs = loss.buffers(gpu, s.width, s.height)?;
         Ok(PhotoLoss {
-            bufs: loss.buffers(gpu, s.width, s.height)?,
+            host: gpu.host_buffer("loss partial sums (host)", bufs.sums().size)?,
+            bufs,
             d_render: gpu.buffer("d render", s.pixels() * 16)?,
             loss,
         })
@@ -184,6 +189,8 @@ impl PhotoLoss {
         let d = self.d_render.all();
         self.loss
             .record(rec, &mut self.bufs, render.rgba(), target, d, lambda_ssim);
+        let sums = self.bufs.sums();
+        rec.copy(sums, self.host.slice(0, sums.size));
     }
 
     /// ∂L/∂render of the last record.
@@ -191,8 +198,8 @@ impl PhotoLoss {
         self.d_render.all()
     }
 
-    /// Values of the last record (after its submit).
-    pub fn values(&self, gpu: &Gpu) -> Result<LossValues> {
-        self.bufs.values(gpu)
+    /// Values of the last record (after its submit; read from host memory).
+    pub fn values(&self) -> LossValues {
+        self.bufs.values_of(&self.host.read_mapped())
     }
 }

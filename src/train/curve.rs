@@ -1,0 +1,163 @@
+//! Quality against time: the test-PSNR probe frames, the worst training view of a log
+//! interval (a collapse shows as one view far below the rest), time-to-X-dB from a run's
+//! `log.jsonl`, and the PSNR-vs-wall-seconds plot.
+
+use serde::{Deserialize, Serialize};
+
+use super::outputs::LogLine;
+use crate::error::Result;
+use crate::report::{Plot, Series, PALETTE};
+
+/// Test frames the periodic probe renders: at most 4, spread evenly over the test split
+/// (time order of the split), so the curve costs a few renders whatever the split's size.
+pub fn probe_frames(n: usize) -> Vec<usize> {
+    const K: usize = 4;
+    if n <= K {
+        return (0..n).collect();
+    }
+    (0..K).map(|i| i * (n - 1) / (K - 1)).collect()
+}
+
+/// The worst training view seen since the last log line.
+#[derive(Clone, Debug, Default)]
+pub struct WorstView {
+    worst: Option<(f64, String)>,
+}
+
+impl WorstView {
+    pub fn see(&mut self, psnr: f64, id: &str) {
+        // A NaN PSNR is the worst there is.
+        let worse = match &self.worst {
+            None => true,
+            Some((w, _)) => psnr.is_nan() || psnr < *w,
+        };
+        if worse && !self.worst.as_ref().is_some_and(|(w, _)| w.is_nan()) {
+            self.worst = Some((psnr, id.to_string()));
+        }
+    }
+
+    /// The worst view of the interval, starting a new interval.
+    pub fn take(&mut self) -> Option<(f64, String)> {
+        self.worst.take()
+    }
+}
+
+/// Test PSNR first reached at a wall time (the probe's mean over [`probe_frames`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TimeTo {
+    pub psnr_db: f64,
+    /// Training seconds (steps only, across resumes) when the probe first read ≥ `psnr_db`.
+    pub wall_s: f64,
+    pub iteration: u32,
+}
+
+/// Thresholds reported in `metrics.json` (`time_to_psnr`).
+pub const THRESHOLDS_DB: [f64; 7] = [15.0, 18.0, 20.0, 22.0, 25.0, 28.0, 30.0];
+
+/// For each threshold the probe reached, the first log line that read at least it.
+pub fn time_to_psnr(log: &[LogLine]) -> Vec<TimeTo> {
+    THRESHOLDS_DB
+        .iter()
+        .filter_map(|&db| {
+            log.iter()
+                .find(|l| l.test_psnr.is_some_and(|p| p >= db))
+                .map(|l| TimeTo {
+                    psnr_db: db,
+                    wall_s: l.wall_s,
+                    iteration: l.iteration,
+                })
+        })
+        .collect()
+}
+
+/// Test PSNR against training seconds, one curve per labelled log.
+pub fn psnr_time_plot(
+    runs: &[(String, &[LogLine])],
+    width: u32,
+    height: u32,
+) -> Result<image::RgbImage> {
+    let series = runs
+        .iter()
+        .enumerate()
+        .map(|(i, (label, log))| Series {
+            label: label.clone(),
+            points: log
+                .iter()
+                .filter_map(|l| l.test_psnr.map(|p| (l.wall_s, p)))
+                .collect(),
+            color: PALETTE[i % PALETTE.len()],
+        })
+        .collect();
+    Plot {
+        title: "test PSNR against training time".into(),
+        x_label: "training seconds".into(),
+        y_label: "test PSNR (dB)".into(),
+        series,
+        width,
+        height,
+    }
+    .render()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(iteration: u32, wall_s: f64, test_psnr: Option<f64>) -> LogLine {
+        LogLine {
+            iteration,
+            loss: 0.1,
+            psnr: 20.0,
+            num_gaussians: 1,
+            motion_weight: 0.0,
+            ms: 1.0,
+            dynamic_fraction: 1.0,
+            wall_s,
+            test_psnr,
+            worst_psnr: None,
+            worst_view: None,
+        }
+    }
+
+    #[test]
+    fn probe_frames_spread_over_the_split() {
+        assert_eq!(probe_frames(0), Vec::<usize>::new());
+        assert_eq!(probe_frames(3), vec![0, 1, 2]);
+        assert_eq!(probe_frames(10), vec![0, 3, 6, 9]);
+    }
+
+    #[test]
+    fn time_to_takes_the_first_line_at_or_above() {
+        let log = [
+            line(50, 5.0, Some(14.0)),
+            line(100, 10.0, None),
+            line(150, 15.0, Some(18.0)),
+            line(200, 20.0, Some(17.0)),
+            line(250, 25.0, Some(21.0)),
+        ];
+        let t = time_to_psnr(&log);
+        let got: Vec<(f64, f64, u32)> = t
+            .iter()
+            .map(|t| (t.psnr_db, t.wall_s, t.iteration))
+            .collect();
+        assert_eq!(
+            got,
+            vec![(15.0, 15.0, 150), (18.0, 15.0, 150), (20.0, 25.0, 250)]
+        );
+    }
+
+    #[test]
+    fn worst_view_keeps_the_lowest_and_nan() {
+        let mut w = WorstView::default();
+        w.see(20.0, "a");
+        w.see(12.0, "b");
+        w.see(15.0, "c");
+        assert_eq!(w.take(), Some((12.0, "b".to_string())));
+        assert_eq!(w.take(), None);
+        w.see(20.0, "a");
+        w.see(f64::NAN, "n");
+        w.see(3.0, "c");
+        let (p, id) = w.take().unwrap();
+        assert!(p.is_nan() && id == "n");
+    }
+}
