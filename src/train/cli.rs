@@ -261,6 +261,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         )),
         e => e,
     })?;
+    eprintln!("{}", tr.init_report);
     let ckpt = last_checkpoint(&out);
     let resume = a.resume && ckpt.is_file();
     if resume {

@@ -8,6 +8,7 @@ pub mod cli;
 pub mod config;
 pub mod curve;
 pub mod frames;
+pub mod init;
 pub mod outputs;
 pub mod passes;
 pub mod plan;
@@ -74,6 +75,8 @@ pub struct Trainer<'g> {
     pub last_split: Option<(u32, SplitStats)>,
     /// What the last step ran (its plan, less a motion term skipped because nothing moved).
     pub last_plan: Option<StepPlan>,
+    /// Which of the dataset's points became the initial Gaussians.
+    pub init_report: init::InitReport,
 }
 
 impl<'g> Trainer<'g> {
@@ -93,7 +96,7 @@ impl<'g> Trainer<'g> {
             }
             frames::attach_gt_flow(gpu, &mut train, data)?;
         }
-        let init = initial_gaussians(data, cfg)?;
+        let (init, init_report) = init::initial_gaussians(data, cfg)?;
         let budget = cfg.densify.budget;
         let model = Model {
             gaussians: GaussianState::new(gpu, budget, cfg.sh_degree, &init)?,
@@ -137,6 +140,7 @@ impl<'g> Trainer<'g> {
             iteration: 0,
             last_split: None,
             last_plan: None,
+            init_report,
         })
     }
 
@@ -495,30 +499,4 @@ fn classifier(
     let probe = ProbeConfig::even(sp.threshold_px, sp.noise_k, sp.probe_times, lo, hi);
     let cams: Vec<Camera> = frames.iter().map(|f| f.camera).collect();
     Classifier::new(gpu, sizes.capacity, &cams, probe).map(Some)
-}
-
-/// The initial Gaussians from the dataset's points, evenly subsampled to the budget.
-fn initial_gaussians(data: &Dataset, cfg: &TrainConfig) -> Result<HostGaussians> {
-    let points: Vec<[f32; 3]> = data.points.positions.iter().map(|p| p.to_array()).collect();
-    let host = HostGaussians::from_points(&points, data.points.colors.as_deref(), cfg.sh_degree)?;
-    let budget = cfg.densify.budget as usize;
-    if host.len() <= budget {
-        return Ok(host);
-    }
-    // Keep an even subsample: the budget bounds every buffer.
-    let step = host.len() as f64 / budget as f64;
-    let keep: Vec<usize> = (0..budget).map(|i| (i as f64 * step) as usize).collect();
-    let r = 3 * (host.sh_coeffs as usize - 1);
-    Ok(HostGaussians {
-        sh_coeffs: host.sh_coeffs,
-        means: keep.iter().map(|&i| host.means[i]).collect(),
-        log_scales: keep.iter().map(|&i| host.log_scales[i]).collect(),
-        quats: keep.iter().map(|&i| host.quats[i]).collect(),
-        opacity: keep.iter().map(|&i| host.opacity[i]).collect(),
-        sh_dc: keep.iter().map(|&i| host.sh_dc[i]).collect(),
-        sh_rest: keep
-            .iter()
-            .flat_map(|&i| host.sh_rest[i * r..(i + 1) * r].to_vec())
-            .collect(),
-    })
 }
