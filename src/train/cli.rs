@@ -110,6 +110,10 @@ pub struct TrainArgs {
     /// [default: 0.25].
     #[arg(long)]
     pub probe_every: Option<f32>,
+    /// Drop initial points no training camera sees or within a camera's near range: on or off
+    /// [preset: paper off, fast on].
+    #[arg(long, value_parser = clap::builder::BoolishValueParser::new())]
+    pub init_filter: Option<bool>,
     /// Print a per-kernel GPU time breakdown at every log line.
     #[arg(short, long)]
     pub verbose: bool,
@@ -209,6 +213,7 @@ pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig>
     if c.deform == super::config::DeformMode::Off && a.motion_weight.is_none() {
         c.motion_weight = 0.0; // a static model has no motion term; --deform off says so
     }
+    c.init_filter = a.init_filter.unwrap_or(c.init_filter);
     c.sparsity.mode = a.sparsity.unwrap_or(c.sparsity.mode);
     c.sparsity.threshold_px = a.sparsity_threshold.unwrap_or(c.sparsity.threshold_px);
     c.sparsity.every = a.probe_every.unwrap_or(c.sparsity.every);

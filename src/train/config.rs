@@ -147,6 +147,10 @@ pub struct TrainConfig {
     /// "3DGS" rows; no MLP is ever run).
     #[serde(default)]
     pub deform: DeformMode,
+    /// Drop the dataset's initial points that no training camera sees or that sit within a
+    /// camera's near range (see `train::init`); off in the paper preset (faithful), on in fast.
+    #[serde(default)]
+    pub init_filter: bool,
     /// Run the MLP over the dynamic Gaussians only (see [`SparsityConfig`]).
     #[serde(default)]
     pub sparsity: SparsityConfig,
@@ -300,6 +304,7 @@ impl TrainConfig {
             motion_norm_grad: NormGrad::Detached,
             motion_flow: MotionFlow::Tvl1,
             deform: DeformMode::On,
+            init_filter: false,
             sparsity: SparsityConfig::default(),
         }
     }
@@ -324,6 +329,7 @@ impl TrainConfig {
             log_interval: 50,
             checkpoint_interval: 200,
             test_interval: 50,
+            init_filter: true,
             motion_start: 400,
             ..TrainConfig::paper()
         }

@@ -12,6 +12,8 @@ use crate::model::gaussians::HostGaussians;
 /// How many of the dataset's points were dropped, and why.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct InitReport {
+    /// Whether the filter ran (`init_filter`).
+    pub filtered: bool,
     pub points: usize,
     /// Behind, or projecting outside (beyond a 10 % margin) of, every training camera.
     pub outside: usize,
@@ -21,6 +23,13 @@ pub struct InitReport {
 
 impl std::fmt::Display for InitReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if !self.filtered {
+            return write!(
+                f,
+                "initial points: all {} kept (init filter off)",
+                self.points
+            );
+        }
         write!(
             f,
             "initial points: kept {} of {} ({} outside every training view, {} within a \
@@ -38,6 +47,7 @@ impl std::fmt::Display for InitReport {
 pub fn visible_points(points: &[[f32; 3]], cams: &[Camera], near: f32) -> (Vec<usize>, InitReport) {
     let centres: Vec<glam::Vec3> = cams.iter().map(Camera::centre).collect();
     let mut r = InitReport {
+        filtered: true,
         points: points.len(),
         ..InitReport::default()
     };
@@ -72,7 +82,15 @@ pub fn visible_points(points: &[[f32; 3]], cams: &[Camera], near: f32) -> (Vec<u
 pub fn initial_gaussians(data: &Dataset, cfg: &TrainConfig) -> Result<(HostGaussians, InitReport)> {
     let all: Vec<[f32; 3]> = data.points.positions.iter().map(|p| p.to_array()).collect();
     let cams: Vec<Camera> = data.train.iter().map(|f| f.camera).collect();
-    let (keep, report) = visible_points(&all, &cams, super::frames::near_of(data));
+    let (keep, report) = if cfg.init_filter {
+        visible_points(&all, &cams, super::frames::near_of(data))
+    } else {
+        let r = InitReport {
+            points: all.len(),
+            ..InitReport::default()
+        };
+        ((0..all.len()).collect(), r)
+    };
     if keep.is_empty() && !all.is_empty() {
         return Err(Error::Invalid(format!(
             "initial points: none of the {} points is in front of a training camera, inside \
