@@ -19,6 +19,8 @@ pub struct InitReport {
     pub outside: usize,
     /// Within the near range of some training camera.
     pub near: usize,
+    /// Kept, with the initial scale shrunk to [`MAX_FOOTPRINT`] of a view that sees it.
+    pub shrunk: usize,
 }
 
 impl std::fmt::Display for InitReport {
@@ -33,13 +35,33 @@ impl std::fmt::Display for InitReport {
         write!(
             f,
             "initial points: kept {} of {} ({} outside every training view, {} within a \
-             camera's near range)",
+             camera's near range); {} shrunk to cover at most {}% of a view's width",
             self.points - self.outside - self.near,
             self.points,
             self.outside,
-            self.near
+            self.near,
+            self.shrunk,
+            MAX_FOOTPRINT * 100.0
         )
     }
+}
+
+/// Largest initial footprint: 3σ at most this fraction of the image width in every training
+/// view that sees the Gaussian. A random point near a camera gets a kNN scale of the scene's
+/// point spacing and would cover that whole view at the start.
+pub const MAX_FOOTPRINT: f32 = 0.1;
+
+/// Largest log-scale of a Gaussian at `p` whose 3σ footprint stays within [`MAX_FOOTPRINT`] of
+/// the image width in every camera that sees it (`None` when none does).
+pub fn max_log_scale(p: glam::Vec3, cams: &[Camera], near: f32) -> Option<f32> {
+    cams.iter()
+        .filter_map(|c| {
+            let (px, z) = c.project(p)?;
+            let inside =
+                px.x >= 0.0 && px.y >= 0.0 && px.x < c.width as f32 && px.y < c.height as f32;
+            (inside && z > near).then(|| (MAX_FOOTPRINT * c.width as f32 * z / (3.0 * c.fx)).ln())
+        })
+        .reduce(f32::min)
 }
 
 /// Indices of the points some camera sees: in front of it beyond `near`, projecting inside its
@@ -107,7 +129,20 @@ pub fn initial_gaussians(data: &Dataset, cfg: &TrainConfig) -> Result<(HostGauss
         .colors
         .as_ref()
         .map(|c| keep.iter().map(|&i| c[i]).collect());
-    let host = HostGaussians::from_points(&points, colors.as_deref(), cfg.sh_degree)?;
+    let mut host = HostGaussians::from_points(&points, colors.as_deref(), cfg.sh_degree)?;
+    let mut report = report;
+    if cfg.init_filter {
+        let near = super::frames::near_of(data);
+        for (p, ls) in host.means.iter().zip(host.log_scales.iter_mut()) {
+            let Some(m) = max_log_scale(glam::Vec3::from_array(*p), &cams, near) else {
+                continue;
+            };
+            if ls[0] > m {
+                *ls = [m; 3];
+                report.shrunk += 1;
+            }
+        }
+    }
     let budget = cfg.densify.budget as usize;
     if host.len() <= budget {
         return Ok((host, report));
@@ -167,6 +202,13 @@ mod tests {
         assert_eq!(keep, vec![0, 4]);
         assert_eq!((r.points, r.outside, r.near), (5, 2, 1));
         assert!(r.to_string().contains("kept 2 of 5"));
+        // The footprint cap: 3σ ≤ 10 % of 100 px at the nearest view's depth (a: 4, b: 4).
+        let m = max_log_scale(Vec3::ZERO, &[a, b], 0.1).unwrap();
+        assert!((m.exp() - 0.1 * 100.0 * 4.0 / 300.0).abs() < 1e-6);
+        // Nearer to a (depth 0.5): the cap is set by a, the closer view.
+        let m = max_log_scale(Vec3::new(0.0, 0.0, -3.5), &[a, b], 0.1).unwrap();
+        assert!((m.exp() - 0.1 * 100.0 * 0.5 / 300.0).abs() < 1e-6);
+        assert_eq!(max_log_scale(Vec3::new(0.0, 0.0, -5.0), &[a], 0.1), None);
         // No camera: nothing is seen.
         assert_eq!(visible_points(&pts, &[], 0.1).0, Vec::<usize>::new());
     }
