@@ -118,7 +118,8 @@ fn config_rejects_unknown_fields_and_bad_values() {
     a.iterations = Some(123);
     a.mlp_width = Some(16);
     let r = resolve_config(&a).unwrap();
-    assert_eq!((r.iterations, r.mlp_width, r.densify.until), (123, 16, 123));
+    // --iterations scales the schedule: the fast preset densifies until 450 of 600.
+    assert_eq!((r.iterations, r.mlp_width, r.densify.until), (123, 16, 92));
     // Without --preset: fast for the built-in scene or on a CPU device, paper for a dataset
     // on a GPU; --preset always wins.
     let mut d = args();
@@ -188,6 +189,7 @@ fn fast_recipe_reaches_the_bar_at_a_small_budget() {
     );
 }
 
-/// Measured 2026-11-23 (lavapipe, seed 0): see the test's output; the bar sits below it by more
-/// than run-to-run noise (~0.1 dB) and well above the initial PSNR.
-const BAR_DB: f64 = 0.0;
+/// Measured 2026-11-23 (lavapipe, 2 vCPU): 11.32 dB → 14.71 dB after 200 iterations with the
+/// fast preset's learning rates; the paper's rates reach 12.59 dB there, so the bar (0.7 dB
+/// under the measurement, run-to-run noise ~0.1 dB) fails a recipe that learns that slowly.
+const BAR_DB: f64 = 14.0;
