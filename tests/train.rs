@@ -170,26 +170,39 @@ fn fast_recipe_reaches_the_bar_at_a_small_budget() {
     // The MLP's size does not change the recipe; a small one keeps the test quick.
     (cfg.mlp_width, cfg.mlp_depth, cfg.densify.budget) = (16, 2, 8000);
     cfg.validate().unwrap();
-    let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
-    let probes = dispflow_vk::train::curve::probe_frames(ds.val.len());
-    let before = tr.test_psnr(&probes).unwrap();
-    let mut curve = Vec::new();
-    while tr.iteration < cfg.iterations {
-        tr.step(false, false).unwrap();
-        if tr.iteration % cfg.test_interval == 0 || tr.iteration == cfg.iterations {
-            curve.push((tr.iteration, tr.test_psnr(&probes).unwrap()));
+    let curve = |cfg: &TrainConfig| {
+        let mut tr = Trainer::new(&gpu, cfg, &ds).unwrap();
+        let probes = dispflow_vk::train::curve::probe_frames(ds.val.len());
+        let mut curve = vec![(0, tr.test_psnr(&probes).unwrap())];
+        while tr.iteration < cfg.iterations {
+            tr.step(false, false).unwrap();
+            if tr.iteration % cfg.test_interval == 0 || tr.iteration == cfg.iterations {
+                curve.push((tr.iteration, tr.test_psnr(&probes).unwrap()));
+            }
         }
-    }
-    let after = curve.last().unwrap().1;
-    eprintln!("test PSNR {before:.2} dB -> {curve:.2?}");
-    assert!(curve.iter().all(|c| c.1.is_finite()));
+        eprintln!("test PSNR over iterations: {curve:.2?}");
+        assert!(curve.iter().all(|c| c.1.is_finite()));
+        curve.last().unwrap().1
+    };
+    let after = curve(&cfg);
     assert!(
         after >= BAR_DB,
-        "test PSNR {after:.2} dB after 200 iterations, below the bar {BAR_DB} dB (from {before:.2})"
+        "test PSNR {after:.2} dB after 200 iterations, below the bar {BAR_DB} dB"
+    );
+    // The same run with the paper's learning rates (made for 20 000 iterations) stays below
+    // the bar: what the bar measures is how fast the recipe learns.
+    let paper_rates = TrainConfig {
+        lr: dispflow_vk::train::config::LearningRates::default(),
+        ..cfg.clone()
+    };
+    let slow = curve(&paper_rates);
+    assert!(
+        after > slow + 1.0,
+        "the fast rates ({after:.2} dB) should beat the paper's ({slow:.2} dB) at 200 iterations"
     );
 }
 
 /// Measured 2026-11-23 (lavapipe, 2 vCPU): 11.32 dB → 14.71 dB after 200 iterations with the
-/// fast preset's learning rates; the paper's rates reach 12.59 dB there, so the bar (0.7 dB
-/// under the measurement, run-to-run noise ~0.1 dB) fails a recipe that learns that slowly.
+/// fast preset's learning rates (14.69 on a second run), the paper's rates 13.18 dB; the bar
+/// sits 0.7 dB under the fast recipe's measurement.
 const BAR_DB: f64 = 14.0;

@@ -74,7 +74,7 @@ pub struct TrainArgs {
     #[arg(long)]
     pub pair_gap: Option<u32>,
     /// Optical-flow preset: fast, default or accurate (pyramid levels, warps, iterations)
-    /// [preset: paper default, fast fast].
+    /// [default: default].
     #[arg(long)]
     pub flow_preset: Option<String>,
     /// Motion decomposition: direct = intermediate render (v1, t2), the paper's; reverse =

@@ -290,7 +290,7 @@ pub enum Preset {
     /// The paper's setting: 20 000 iterations, 8×256 MLP, warm-up 3000, densify 500–15 000.
     Paper,
     /// Minutes on a CPU: 600 iterations, 4×64 MLP, warm-up 200, densify 100–450 (no opacity
-    /// reset), SH degree 1, short-run learning rates, initial points filtered, fast flow.
+    /// reset), SH degree 1, short-run learning rates, initial points filtered.
     Fast,
 }
 
@@ -350,9 +350,6 @@ impl TrainConfig {
             test_interval: 50,
             init_filter: true,
             lr: LearningRates::fast(),
-            // Same test PSNR as "default" at the fast preset, fewer warps and iterations
-            // (built-in: 19.83 vs 19.80 dB, issue 19's note).
-            flow_preset: "fast".into(),
             motion_start: 400,
             ..TrainConfig::paper()
         }
