@@ -1,4 +1,6 @@
 //! nerfies-format loader (NeRF-DS, HyperNeRF, Nerfies captures).
+//! Over 600 lines: each of the format's files has its reader with its own field-by-field
+//! error messages; they share the normalisation and split rules documented here.
 //!
 //! Reads `dataset.json`, `metadata.json`, `scene.json`, `camera/<id>.json`, `rgb/<s>x/<id>.png`,
 //! optional `mask/<s>x/<id>.png.png` (moving = white), optional `flow/<id>.npy` (synthetic

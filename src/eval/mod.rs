@@ -95,6 +95,18 @@ struct Shot<'a> {
     frame: Option<&'a GpuFrame>,
 }
 
+impl<'a> Shot<'a> {
+    /// Test frame `f` at its view and time, with the displacement flow since `prev`.
+    fn of_frame(f: &'a GpuFrame, prev: Option<f32>) -> Self {
+        Shot {
+            cam: &f.camera,
+            t: f.time,
+            prev,
+            frame: Some(f),
+        }
+    }
+}
+
 /// Scratch of evaluation, sized like training's (one image size, the Gaussian budget).
 pub struct Evaluator {
     deform: DeformPass,
@@ -165,13 +177,13 @@ impl Evaluator {
         f: &GpuFrame,
         want_images: bool,
     ) -> Result<FrameEval> {
-        let v = Shot {
-            cam: &f.camera,
-            t: f.time,
-            prev: f.prev_time,
-            frame: Some(f),
-        };
-        self.evaluate(gpu, model, view, v, want_images)
+        self.evaluate(
+            gpu,
+            model,
+            view,
+            Shot::of_frame(f, f.prev_time),
+            want_images,
+        )
     }
 
     /// Photometric values of test frame `f` alone (no motion metrics, no pictures).
@@ -182,13 +194,7 @@ impl Evaluator {
         view: ModelView,
         f: &GpuFrame,
     ) -> Result<LossValues> {
-        let v = Shot {
-            cam: &f.camera,
-            t: f.time,
-            prev: None,
-            frame: Some(f),
-        };
-        self.evaluate(gpu, model, view, v, false)?;
+        self.evaluate(gpu, model, view, Shot::of_frame(f, None), false)?;
         Ok(self.loss.values())
     }
 

@@ -1,4 +1,6 @@
 //! The differentiable tile rasteriser (`glsl/raster/*.comp`). CPU twin: `reference::raster`.
+//! Over 600 lines: forward, backward and the overflow re-run share one buffer set and its
+//! capacity contract; split, each part would restate which pass fills which buffer.
 //!
 //! Forward: `project` → scan of tiles touched → `bin_total` → `bin_emit` ((tile | depth) keys)
 //! → radix sort (only `32 + tile_bits` bits) → `bin_ranges` → `blend_fwd` (one of
