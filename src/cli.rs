@@ -27,6 +27,10 @@ pub enum Command {
     /// orbit or a spiral) to PNGs, optionally with the displacement-flow heatmap and per-frame
     /// 3DGS .ply exports.
     Render(dispflow_vk::eval::render::RenderArgs),
+    /// Score the scene motion a motion step would learn from, at each kept checkpoint of a
+    /// run: flow_mmap of every estimator variant against the motion masks, next to the
+    /// ground-truth flow's (RUN/signal.json and signal.md).
+    Signal(dispflow_vk::eval::signal::SignalArgs),
     /// List the Vulkan devices and the limits that matter to the kernels.
     Devices,
     /// Time the GPU kernels (sort, scan, rasteriser forward/backward) with GPU timestamps and

@@ -15,6 +15,9 @@ fn main() -> anyhow::Result<()> {
         cli::Command::Eval(args) => {
             dispflow_vk::eval::run::run_eval(&args)?;
         }
+        cli::Command::Signal(args) => {
+            dispflow_vk::eval::signal::run_signal(&args)?;
+        }
         cli::Command::Render(args) => {
             dispflow_vk::eval::render::run_render(&args)?;
         }

@@ -551,6 +551,7 @@ mod gpu_step {
         AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass,
         StepSizes,
     };
+    use dispflow_vk::train::passes::{SceneSignal, SignalConfig};
     use dispflow_vk::train::plan::{Decomposition, MotionPlan, StepLr, StepPlan};
     use dispflow_vk::train::step::{record_step, StepPasses};
     use dispflow_vk::vk::{Gpu, Recorder};
@@ -622,7 +623,13 @@ mod gpu_step {
                     &sizes,
                     roles,
                     norm,
-                    Box::new(FixedMotion(fixed)),
+                    SceneSignal::new(
+                        gpu,
+                        Box::new(FixedMotion(fixed)),
+                        SignalConfig::default(),
+                        sizes.pixels(),
+                    )
+                    .unwrap(),
                 )
                 .unwrap(),
             ),

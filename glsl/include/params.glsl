@@ -276,8 +276,16 @@ struct OpacityResetParams {
 struct DispFlowParams {
     uint n;           // Gaussians (displacement stages) or pixels (motion L1)
     float weight;     // α_t of the motion term (motion L1)
-    uint pad0;
+    uint conf;        // motion L1: 1 = weight each pixel by the confidence binding
     uint pad1;
+};
+
+// src/kernels/dispflow.rs — scene_signal (residual correction and confidence of the scene motion)
+struct SceneSignalParams {
+    uint n;           // pixels
+    uint residual;    // 1: subtract flow(photo → render(v1, t1))
+    float sigma;      // confidence scale on the mean |photo − render(v1, t1)|; 0 = off (c = 1)
+    uint pad0;
 };
 
 // src/kernels/flow.rs — TV-L1 optical flow stages (one struct for all; each stage says which

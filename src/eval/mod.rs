@@ -8,6 +8,7 @@ pub mod lpips;
 pub mod render;
 pub mod report;
 pub mod run;
+pub mod signal;
 
 use std::rc::Rc;
 

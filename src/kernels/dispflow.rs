@@ -1,7 +1,8 @@
 //! The trainer-side stages of the DispFlow-GS motion term (`glsl/dispflow/*.comp`); CPU twin:
 //! `reference::dispflow`. The displacement δ = dx(t2) − dx(t1) that the rasteriser splats as
-//! three feature channels, its backward into both MLP passes, and the L1 motion loss between
-//! the normalised magnitude maps.
+//! three feature channels, its backward into both MLP passes, the scene motion's residual
+//! correction and confidence (`scene_signal`), and the L1 motion loss between the normalised
+//! magnitude maps.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -15,14 +16,39 @@ use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
 pub struct DispFlowParams {
     pub n: u32,
     pub weight: f32,
-    pub pad0: u32,
+    /// Motion L1: 1 = weight each pixel by the confidence binding.
+    pub conf: u32,
     pub pad1: u32,
+}
+
+/// Mirrors `SceneSignalParams` in glsl/include/params.glsl (checked by tests/layout.rs).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct SceneSignalParams {
+    pub n: u32,
+    /// 1: subtract the flow photo → render(v1, t1).
+    pub residual: u32,
+    /// Confidence scale σ on the mean |photo − render(v1, t1)| (RGB in [0, 1]); 0 = c ≡ 1.
+    pub sigma: f32,
+    pub pad0: u32,
+}
+
+/// The buffers of one `scene_signal` dispatch ([H·W] each): the two flows out of the photo,
+/// the photo and the render at (v1, t1) in, the scene motion and its confidence out.
+pub struct SignalIo<'a> {
+    pub flow_t2: BufSlice<'a>,
+    pub flow_t1: BufSlice<'a>,
+    pub photo: BufSlice<'a>,
+    pub render_t1: BufSlice<'a>,
+    pub scene: BufSlice<'a>,
+    pub conf: BufSlice<'a>,
 }
 
 pub struct DispFlow {
     displacement: ComputePipeline,
     displacement_bwd: ComputePipeline,
     motion_l1: ComputePipeline,
+    scene_signal: ComputePipeline,
 }
 
 impl DispFlow {
@@ -31,6 +57,7 @@ impl DispFlow {
             displacement: gpu.pipeline(&shaders::dispflow::DISPLACEMENT)?,
             displacement_bwd: gpu.pipeline(&shaders::dispflow::DISPLACEMENT_BWD)?,
             motion_l1: gpu.pipeline(&shaders::dispflow::MOTION_L1)?,
+            scene_signal: gpu.pipeline(&shaders::dispflow::SCENE_SIGNAL)?,
         })
     }
 
@@ -71,10 +98,10 @@ impl DispFlow {
         );
     }
 
-    /// `weight · mean |m_scene − m_disp|` over `pixels` values: gradient wrt `m_disp` into
-    /// `d_disp` and per-workgroup partial sums of |·| (unweighted) into `sums`
-    /// ([ceil(pixels / 256)] f32). `degenerate` holds two u32 flags (disp, scene): either set
-    /// skips the term.
+    /// `weight · (1/N) Σ c·|m_scene − m_disp|` over `pixels` values (`c` ≡ 1 without `conf`):
+    /// gradient wrt `m_disp` into `d_disp` and per-workgroup partial sums of c·|·| (without
+    /// the weight) into `sums` ([ceil(pixels / 256)] f32). `degenerate` holds two u32 flags
+    /// (disp, scene): either set skips the term.
     #[allow(clippy::too_many_arguments)] // the stage's bindings, each one named
     pub fn motion_l1(
         &self,
@@ -86,16 +113,51 @@ impl DispFlow {
         degenerate: BufSlice<'_>,
         d_disp: BufSlice<'_>,
         sums: BufSlice<'_>,
+        conf: Option<BufSlice<'_>>,
     ) {
         let pc = DispFlowParams {
             n: pixels,
             weight,
+            conf: conf.is_some() as u32,
             ..Default::default()
         };
+        // Without a confidence the binding is never read; any buffer fills it.
+        let c = conf.unwrap_or(m_scene);
         rec.dispatch_threads(
             &self.motion_l1,
             &pc,
-            &[m_disp, m_scene, degenerate, d_disp, sums],
+            &[m_disp, m_scene, degenerate, d_disp, sums, c],
+            [pixels, 1, 1],
+        );
+    }
+
+    /// The scene motion `flow_t2 − residual·flow_t1` and its confidence
+    /// `exp(−mean|photo − render_t1| / sigma)` (1 when `sigma` = 0) over `pixels`.
+    pub fn scene_signal(
+        &self,
+        rec: &mut Recorder<'_>,
+        pixels: u32,
+        residual: bool,
+        sigma: f32,
+        io: &SignalIo<'_>,
+    ) {
+        let pc = SceneSignalParams {
+            n: pixels,
+            residual: residual as u32,
+            sigma,
+            pad0: 0,
+        };
+        rec.dispatch_threads(
+            &self.scene_signal,
+            &pc,
+            &[
+                io.flow_t2,
+                io.flow_t1,
+                io.photo,
+                io.render_t1,
+                io.scene,
+                io.conf,
+            ],
             [pixels, 1, 1],
         );
     }

@@ -30,7 +30,8 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         };
     }
     vec![
-        layout!(dispflow::DispFlowParams, n, weight, pad0, pad1),
+        layout!(dispflow::DispFlowParams, n, weight, conf, pad1),
+        layout!(dispflow::SceneSignalParams, n, residual, sigma, pad0),
         layout!(deform::DeformParams, n, pad0, pad1, pad2),
         layout!(
             sparse::ProbeParams,

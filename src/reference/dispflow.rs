@@ -28,10 +28,12 @@ pub fn displacement_bwd<T: Copy + Default + Sub<Output = T>>(
     (d1, d2)
 }
 
-/// (mean |m_scene − m_disp|, ∂(weight · mean)/∂m_disp); zeros when `skip` (degenerate map).
+/// ((1/N) Σ c·|m_scene − m_disp|, ∂(weight · that)/∂m_disp), c ≡ 1 without `conf`; zeros
+/// when `skip` (degenerate map).
 pub fn motion_l1<T: Copy + Into<f64>>(
     m_disp: &[T],
     m_scene: &[T],
+    conf: Option<&[T]>,
     weight: f64,
     skip: bool,
 ) -> (f64, Vec<f64>) {
@@ -43,10 +45,13 @@ pub fn motion_l1<T: Copy + Into<f64>>(
     let g = m_disp
         .iter()
         .zip(m_scene)
-        .map(|(&a, &b)| {
+        .enumerate()
+        .map(|(i, (&a, &b))| {
+            let c = conf.map_or(1.0, |c| c[i].into());
             let e = a.into() - b.into();
-            sum += e.abs();
+            sum += c * e.abs();
             weight
+                * c
                 * if e > 0.0 {
                     1.0
                 } else if e < 0.0 {
@@ -58,4 +63,35 @@ pub fn motion_l1<T: Copy + Into<f64>>(
         })
         .collect();
     (sum / n, g)
+}
+
+/// Twin of `scene_signal`: (scene motion `flow_t2 − residual·flow_t1`, confidence
+/// `exp(−mean_rgb|photo − render_t1| / sigma)`, 1 when `sigma` = 0); non-finite → (0, 0).
+pub fn scene_signal(
+    flow_t2: &[[f32; 2]],
+    flow_t1: &[[f32; 2]],
+    photo: &[[f32; 4]],
+    render_t1: &[[f32; 4]],
+    residual: bool,
+    sigma: f64,
+) -> (Vec<[f64; 2]>, Vec<f64>) {
+    let mut scene = Vec::with_capacity(flow_t2.len());
+    let mut conf = Vec::with_capacity(flow_t2.len());
+    for p in 0..flow_t2.len() {
+        let r = if residual { flow_t1[p] } else { [0.0; 2] };
+        let s = [0, 1].map(|k| flow_t2[p][k] as f64 - r[k] as f64);
+        let c = if sigma > 0.0 {
+            let e: f64 = (0..3)
+                .map(|k| (photo[p][k] as f64 - render_t1[p][k] as f64).abs())
+                .sum::<f64>()
+                / 3.0;
+            (-e / sigma).exp()
+        } else {
+            1.0
+        };
+        let ok = s.iter().all(|v| v.is_finite()) && c.is_finite();
+        scene.push(if ok { s } else { [0.0; 2] });
+        conf.push(if ok { c } else { 0.0 });
+    }
+    (scene, conf)
 }

@@ -373,7 +373,7 @@ fn forward(inp: &StepInputs<'_>, p: &StepParams64, view_means: Option<&[[f64; 3]
     let skipped = disp.stats.flag != NormFlag::Ok || scene.stats.flag != NormFlag::Ok;
     // 7. Motion loss and ∂/∂m̂_disp.
     let weight = inp.motion_weight as f64;
-    let (mean_l1, d_m_hat) = dispflow::motion_l1(&disp.m_hat, &scene.m_hat, weight, skipped);
+    let (mean_l1, d_m_hat) = dispflow::motion_l1(&disp.m_hat, &scene.m_hat, None, weight, skipped);
     (skipped, disp.stats.argmin, disp.stats.argmax).hash(&mut sig);
     if !skipped {
         for (a, b) in disp.m_hat.iter().zip(&scene.m_hat) {

@@ -114,6 +114,32 @@ pub struct TrainArgs {
     /// [preset: paper off, fast on].
     #[arg(long, value_parser = clap::builder::BoolishValueParser::new())]
     pub init_filter: Option<bool>,
+    /// Residual-flow correction of the scene motion: subtract the flow photo → render(v1, t1)
+    /// (reconstruction error) from the flow photo → render(v1, t2); on or off [default: off].
+    #[arg(long, value_parser = clap::builder::BoolishValueParser::new())]
+    pub motion_residual: Option<bool>,
+    /// Confidence σ of the scene motion: each pixel weighs exp(−mean|photo − render(v1, t1)|
+    /// / σ) in the motion loss (colours in [0, 1]); 0 = off [default: 0].
+    #[arg(long)]
+    pub motion_confidence: Option<f32>,
+    /// Run the motion term on every k-th step after its start only (a speed knob) [default: 1].
+    #[arg(long)]
+    pub motion_every: Option<u32>,
+    /// Blur the photo's grey image by k binomial passes (σ = √k px) before the optical flow,
+    /// to match a blurry render [default: 0].
+    #[arg(long)]
+    pub flow_blur_photo: Option<u32>,
+    /// Structure–texture factor β in [0, 1): the flow sees I − β·blur(I), not the shading
+    /// [default: 0 = off].
+    #[arg(long)]
+    pub flow_texture: Option<f32>,
+    /// Finest pyramid level the optical flow is solved at (0 = full resolution; 1 = half,
+    /// about 4× cheaper), upsampled afterwards [default: 0].
+    #[arg(long)]
+    pub flow_level: Option<u32>,
+    /// Keep every checkpoint as OUT/checkpoints/NNNNNN.ckpt (for `dispflow-vk signal`).
+    #[arg(long)]
+    pub keep_checkpoints: bool,
     /// Print a per-kernel GPU time breakdown at every log line.
     #[arg(short, long)]
     pub verbose: bool,
@@ -218,6 +244,14 @@ pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig>
     c.sparsity.threshold_px = a.sparsity_threshold.unwrap_or(c.sparsity.threshold_px);
     c.sparsity.every = a.probe_every.unwrap_or(c.sparsity.every);
     c.sparsity.noise_k = a.sparsity_noise_k.unwrap_or(c.sparsity.noise_k);
+    let sm = &mut c.scene_motion;
+    sm.residual = a.motion_residual.unwrap_or(sm.residual);
+    sm.confidence = a.motion_confidence.unwrap_or(sm.confidence);
+    sm.every = a.motion_every.unwrap_or(sm.every);
+    sm.blur_photo = a.flow_blur_photo.unwrap_or(sm.blur_photo);
+    sm.texture = a.flow_texture.unwrap_or(sm.texture);
+    sm.level = a.flow_level.unwrap_or(sm.level);
+    c.keep_checkpoints |= a.keep_checkpoints;
     c.validate()?;
     Ok(c)
 }
@@ -455,7 +489,14 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
             }
         }
         if tr.iteration % cfg.checkpoint_interval == 0 || tr.iteration == cfg.iterations {
-            tr.checkpoint()?.save(&ckpt)?;
+            let c = tr.checkpoint()?;
+            c.save(&ckpt)?;
+            if cfg.keep_checkpoints {
+                c.save(
+                    &out.join("checkpoints")
+                        .join(format!("{:06}.ckpt", tr.iteration)),
+                )?;
+            }
         }
     }
     pb.finish_and_clear();

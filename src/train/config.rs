@@ -173,6 +173,68 @@ pub struct TrainConfig {
     /// Run the MLP over the dynamic Gaussians only (see [`SparsityConfig`]).
     #[serde(default)]
     pub sparsity: SparsityConfig,
+    /// How the scene motion is measured and made robust (see [`SceneMotionConfig`]).
+    #[serde(default)]
+    pub scene_motion: SceneMotionConfig,
+    /// Keep every checkpoint as `checkpoints/NNNNNN.ckpt` besides `last.ckpt` (for
+    /// `dispflow-vk signal`, which scores the scene motion at several stages of one run).
+    #[serde(default)]
+    pub keep_checkpoints: bool,
+}
+
+/// The scene-motion signal's knobs (issue 16; each measured in its closing note). The flow
+/// fields override the `flow_preset`'s.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SceneMotionConfig {
+    /// Subtract the flow photo → render (v1, t1) from the flow photo → render (v1, t2): what
+    /// reconstruction error alone reads as motion (direct order, optical flow only).
+    pub residual: bool,
+    /// Confidence σ: pixels weigh exp(−mean|photo − render(v1, t1)| / σ) in the motion L1
+    /// (normalised by the pixel count); 0 = off (direct order only).
+    pub confidence: f32,
+    /// The motion term runs on every this-many-th step after its start (1 = every step).
+    pub every: u32,
+    /// Binomial blur passes on the photo's grey image before the flow (σ = √k px).
+    pub blur_photo: u32,
+    /// Structure–texture factor β: both images become I − β·blur(I) before the flow; 0 = off.
+    pub texture: f32,
+    /// Finest pyramid level the flow is solved at (0 = full resolution), upsampled after.
+    pub level: u32,
+}
+
+impl Default for SceneMotionConfig {
+    fn default() -> Self {
+        SceneMotionConfig {
+            residual: false,
+            confidence: 0.0,
+            every: 1,
+            blur_photo: 0,
+            texture: 0.0,
+            level: 0,
+        }
+    }
+}
+
+impl SceneMotionConfig {
+    /// The flow preset with this configuration's overrides (validated).
+    pub fn flow_config(
+        &self,
+        preset: &str,
+    ) -> crate::error::Result<crate::kernels::flow::FlowConfig> {
+        // MERGE: blur_a/texture/finest once the flow branch lands.
+        let c = crate::kernels::flow::FlowConfig::preset(preset)?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// The residual correction and confidence of the scene signal.
+    pub fn signal(&self) -> crate::train::passes::SignalConfig {
+        crate::train::passes::SignalConfig {
+            residual: self.residual,
+            sigma: self.confidence,
+        }
+    }
 }
 
 /// Whether the scene is modelled with a deformation at all.
@@ -325,6 +387,8 @@ impl TrainConfig {
             deform: DeformMode::On,
             init_filter: false,
             sparsity: SparsityConfig::default(),
+            scene_motion: SceneMotionConfig::default(),
+            keep_checkpoints: false,
         }
     }
 
@@ -552,6 +616,30 @@ impl TrainConfig {
                 "motion_weight",
                 self.motion_weight,
                 "0 with deform = \"off\" (a static scene has no displacement flow)",
+            )?;
+        }
+        let sm = &self.scene_motion;
+        at_least_1("scene_motion.every", sm.every)?;
+        non_negative("scene_motion.confidence", sm.confidence as f64)?;
+        if !(0.0..1.0).contains(&sm.texture) {
+            bad("scene_motion.texture", sm.texture, "a factor β in [0, 1)")?;
+        }
+        if let Err(e) = sm.flow_config(&self.flow_preset) {
+            bad("scene_motion", e, "flow settings the estimator accepts")?;
+        }
+        let corrected = sm.residual || sm.confidence > 0.0;
+        if self.motion_weight > 0.0 && corrected && self.motion_order == MotionOrder::Reverse {
+            bad(
+                "scene_motion.residual/confidence",
+                "on with motion_order = \"reverse\"",
+                "motion_order = \"direct\" (they compare the photo with the render at (v1, t1))",
+            )?;
+        }
+        if self.motion_weight > 0.0 && sm.residual && self.motion_flow == MotionFlow::Oracle {
+            bad(
+                "scene_motion.residual",
+                "true with motion_flow = \"oracle\"",
+                "false (the oracle has no reconstruction error to remove)",
             )?;
         }
         let sp = &self.sparsity;

@@ -20,7 +20,6 @@ use crate::data::Dataset;
 use crate::error::{Error, Result};
 use crate::eval::lpips::LpipsScorer;
 use crate::eval::{Evaluator, FrameEval, ModelView};
-use crate::kernels::flow::FlowConfig;
 use crate::kernels::loss::LossValues;
 use crate::kernels::motion::NormConfig;
 use crate::kernels::raster::{Camera, Rasterizer};
@@ -33,6 +32,7 @@ use config::{DeformMode, MotionFlow, MotionOrder, NormGrad, SparsityMode, TrainC
 use frames::GpuFrame;
 use passes::motion::{OpticalFlow, OracleFlow};
 use passes::sparsity::{Classifier, ProbeConfig, SplitStats};
+use passes::SceneSignal;
 use passes::{
     AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass,
     SceneMotion, StepSizes,
@@ -124,7 +124,7 @@ impl<'g> Trainer<'g> {
         let raster = Rc::new(Rasterizer::new(gpu)?);
         // Settings the passes read, checked now (the passes themselves are built on the first
         // step: `eval` and `render` open a run without allocating training scratch).
-        FlowConfig::preset(&cfg.flow_preset)?;
+        cfg.scene_motion.flow_config(&cfg.flow_preset)?;
         NormConfig::new(cfg.motion_normalize, 1e-6)?;
         Ok(Trainer {
             gpu,
@@ -158,6 +158,11 @@ impl<'g> Trainer<'g> {
             )?);
         }
         Ok(self.passes.as_mut().expect("just built"))
+    }
+
+    /// The rasteriser the passes share (for probes that draw with the trainer's model).
+    pub fn raster(&self) -> Rc<Rasterizer> {
+        self.raster.clone()
     }
 
     /// The plan of 1-based `iteration`.
@@ -284,7 +289,7 @@ impl<'g> Trainer<'g> {
                 self.raster.clone(),
                 &self.model.deform.cfg,
                 &self.sizes,
-                FlowConfig::preset(&self.cfg.flow_preset)?,
+                self.cfg.scene_motion.flow_config(&self.cfg.flow_preset)?,
                 self.cfg.lambda_ssim,
             )?;
             self.eval = Some(e);
@@ -439,11 +444,12 @@ fn build_passes(
         let source: Box<dyn SceneMotion> = match cfg.motion_flow {
             MotionFlow::Tvl1 => Box::new(OpticalFlow::new(
                 gpu,
-                FlowConfig::preset(&cfg.flow_preset)?,
+                cfg.scene_motion.flow_config(&cfg.flow_preset)?,
                 sizes,
             )?),
             MotionFlow::Oracle => Box::new(OracleFlow),
         };
+        let signal = SceneSignal::new(gpu, source, cfg.scene_motion.signal(), sizes.pixels())?;
         let norm = NormConfig {
             detach_stats: cfg.motion_norm_grad == NormGrad::Detached,
             ..NormConfig::new(cfg.motion_normalize, 1e-6)?
@@ -454,7 +460,7 @@ fn build_passes(
             sizes,
             roles,
             norm,
-            source,
+            signal,
         )?)
     } else {
         None

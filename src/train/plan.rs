@@ -168,7 +168,10 @@ impl StepPlan {
             }
         };
         let weight = motion_weight_at(cfg, it);
-        let motion = (weight > 0.0).then(|| {
+        // `scene_motion.every`: the term runs on every k-th step from its start (a speed knob).
+        let every = cfg.scene_motion.every.max(1);
+        let due = it.saturating_sub(cfg.motion_start) % every == 0;
+        let motion = (weight > 0.0 && due).then(|| {
             let pair = frames.pair(frame, cfg.pair_gap);
             MotionPlan {
                 pair,
@@ -321,6 +324,25 @@ mod tests {
     fn frames() -> FrameTimes {
         // Deliberately not in time order; two frames share t = 0.5.
         FrameTimes::new(vec![0.5, 0.0, 1.0, 0.25, 0.5], TimeNoise::Off, true, 2.0)
+    }
+
+    #[test]
+    fn motion_every_k_runs_the_term_on_every_kth_step_from_its_start() {
+        let mut c = cfg();
+        let f = frames();
+        let on = |c: &TrainConfig| -> Vec<u32> {
+            (1..=c.iterations)
+                .filter(|&it| StepPlan::at(c, &f, it).motion.is_some())
+                .collect()
+        };
+        assert_eq!(on(&c), (40..=100).collect::<Vec<_>>());
+        c.scene_motion.every = 3;
+        assert_eq!(on(&c), (40..=100).step_by(3).collect::<Vec<_>>());
+        // Steps between keep their weight schedule (α_t is not rescaled).
+        assert_eq!(
+            StepPlan::at(&c, &f, 43).motion.unwrap().weight,
+            motion_weight_at(&c, 43)
+        );
     }
 
     #[test]

@@ -94,7 +94,7 @@ pub fn record_step(
         rec.set_zone("intermediate");
         m.render_intermediate(rec, model, &s.deform, pair, p.sh_degree, &opts);
         rec.set_zone("flow");
-        m.scene_motion(rec, pair.0, pair.1);
+        m.scene_motion(rec, pair.0, pair.1, &s.render);
         rec.set_zone("motion");
         m.loss(rec, &s.render, &mp);
     }

@@ -6,12 +6,14 @@ pub mod deform;
 pub mod motion;
 pub mod optim;
 pub mod render;
+pub mod signal;
 pub mod sparsity;
 
 pub use deform::{DeformPass, Slot};
 pub use motion::{MotionPair, MotionTerm, SceneMotion};
 pub use optim::{AdamPass, DensifyPass};
 pub use render::{OverflowWatch, PhotoLoss, RenderPass};
+pub use signal::{SceneSignal, SignalConfig};
 
 use crate::kernels::raster::RasterSize;
 

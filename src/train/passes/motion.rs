@@ -1,12 +1,14 @@
 //! The DispFlow-GS motion term (DESIGN §2): the displacement δ = dx(t2) − dx(t1), splatted by
 //! the render the decomposition names; the intermediate render; the scene motion from a
-//! [`SceneMotion`] source; both magnitude maps normalised; α_t·L1 between them and its
-//! gradient back to the blended displacement flow and, through δ, to both MLP passes.
+//! [`SceneMotion`] source made robust by a [`SceneSignal`]; both magnitude maps normalised;
+//! α_t·(confidence-weighted) L1 between them and its gradient back to the blended
+//! displacement flow and, through δ, to both MLP passes.
 
 use std::rc::Rc;
 
 use super::deform::{DeformPass, Slot};
 use super::render::RenderPass;
+use super::signal::SceneSignal;
 use super::{row, StepSizes};
 use crate::error::Result;
 use crate::kernels::dispflow::DispFlow;
@@ -19,6 +21,7 @@ use crate::train::plan::{Decomposition, MotionPlan};
 use crate::vk::{BufSlice, Buffer, Gpu, Recorder};
 
 /// The two frames of a motion step and the two images the scene motion is measured between.
+#[derive(Clone, Copy)]
 pub struct MotionPair<'a> {
     pub a: &'a GpuFrame,
     pub b: &'a GpuFrame,
@@ -96,8 +99,7 @@ pub struct MotionTerm {
     delta: Buffer,
     /// The intermediate render (no photometric gradient).
     pub inter: RenderPass,
-    source: Box<dyn SceneMotion>,
-    scene_flow: Buffer,
+    signal: SceneSignal,
     norm: MotionNorm,
     norm_cfg: NormConfig,
     norm_disp: NormBuffers,
@@ -120,7 +122,7 @@ impl MotionTerm {
         s: &StepSizes,
         roles: Decomposition,
         norm_cfg: NormConfig,
-        source: Box<dyn SceneMotion>,
+        signal: SceneSignal,
     ) -> Result<Self> {
         let px = s.pixels();
         let norm = MotionNorm::new(gpu)?;
@@ -129,8 +131,7 @@ impl MotionTerm {
             dispflow: DispFlow::new(gpu)?,
             delta: gpu.buffer("displacement", s.capacity as u64 * row::VEC3 * 4)?,
             inter: RenderPass::new(raster, gpu, s, inter_feats)?,
-            source,
-            scene_flow: gpu.buffer("scene flow", px * 8)?,
+            signal,
             norm_disp: norm.buffers(gpu, s.width, s.height, 3)?,
             norm_scene: norm.buffers(gpu, s.width, s.height, 2)?,
             norm,
@@ -194,8 +195,15 @@ impl MotionTerm {
         }
     }
 
-    /// Scene motion of the pair into the term's scene-flow buffer.
-    pub fn scene_motion(&self, rec: &mut Recorder<'_>, a: &GpuFrame, b: &GpuFrame) {
+    /// Scene motion of the pair into the signal's buffers; `photo` is the photometric render
+    /// (v1, t1) the residual correction and the confidence compare with the photo of `a`.
+    pub fn scene_motion(
+        &self,
+        rec: &mut Recorder<'_>,
+        a: &GpuFrame,
+        b: &GpuFrame,
+        photo: &RenderPass,
+    ) {
         let inter = self.inter.rgba();
         let (from, to) = if self.roles.flow_from_photo {
             (a.target.all(), inter)
@@ -203,7 +211,7 @@ impl MotionTerm {
             (inter, b.target.all())
         };
         let pair = MotionPair { a, b, from, to };
-        self.source.record(rec, &pair, self.scene_flow.all());
+        self.signal.record(rec, &pair, photo.rgba());
     }
 
     /// Normalised magnitudes of the displacement flow (blended by the photometric render or
@@ -218,7 +226,7 @@ impl MotionTerm {
         let cfg = self.norm_cfg;
         self.norm.record(rec, &mut self.norm_disp, feat, cfg);
         self.norm
-            .record(rec, &mut self.norm_scene, self.scene_flow.all(), cfg);
+            .record(rec, &mut self.norm_scene, self.signal.flow(), cfg);
         rec.copy(flag_word(&self.norm_disp), self.flags.slice(0, 4));
         rec.copy(flag_word(&self.norm_scene), self.flags.slice(4, 4));
         self.dispflow.motion_l1(
@@ -230,6 +238,7 @@ impl MotionTerm {
             self.flags.all(),
             self.d_mhat.all(),
             self.sums.all(),
+            self.signal.confidence(),
         );
         self.norm.record_backward(
             rec,
@@ -290,7 +299,7 @@ impl MotionTerm {
 
     /// The scene-motion source's name (for logs).
     pub fn source_name(&self) -> &str {
-        self.source.name()
+        self.signal.source_name()
     }
 }
 
