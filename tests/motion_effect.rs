@@ -17,7 +17,7 @@ use dispflow_vk::data;
 use dispflow_vk::eval::report::motion_means;
 use dispflow_vk::kernels::metrics::mmap;
 use dispflow_vk::testing;
-use dispflow_vk::train::config::{MotionFlow, TrainConfig};
+use dispflow_vk::train::config::{MotionFlow, SceneMotionConfig, TrainConfig};
 use dispflow_vk::train::Trainer;
 use train_common::{tiny_config, tiny_dataset};
 
@@ -60,6 +60,31 @@ fn config(weight: f32, flow: MotionFlow) -> TrainConfig {
     c
 }
 
+/// A scene-motion source with `+`-joined options: `tvl1+residual+conf=0.1+blur=2+texture=0.8
+/// +level=1+every=2`, or `oracle`.
+fn parse_flow(spec: &str) -> (MotionFlow, SceneMotionConfig) {
+    let mut parts = spec.split('+');
+    let flow = match parts.next().unwrap() {
+        "oracle" => MotionFlow::Oracle,
+        "tvl1" => MotionFlow::Tvl1,
+        s => panic!("DISPFLOW_MOTION_FLOWS: oracle or tvl1[+options], not {s}"),
+    };
+    let mut m = SceneMotionConfig::default();
+    for p in parts {
+        let (k, v) = p.split_once('=').unwrap_or((p, ""));
+        match k {
+            "residual" => m.residual = true,
+            "conf" => m.confidence = v.parse().unwrap(),
+            "blur" => m.blur_photo = v.parse().unwrap(),
+            "texture" => m.texture = v.parse().unwrap(),
+            "level" => m.level = v.parse().unwrap(),
+            "every" => m.every = v.parse().unwrap(),
+            _ => panic!("DISPFLOW_MOTION_FLOWS: unknown option {k}"),
+        }
+    }
+    (flow, m)
+}
+
 fn list<T>(var: &str, default: &str, parse: impl Fn(&str) -> T) -> Vec<T> {
     std::env::var(var)
         .unwrap_or_else(|_| default.into())
@@ -72,11 +97,7 @@ fn list<T>(var: &str, default: &str, parse: impl Fn(&str) -> T) -> Vec<T> {
 fn motion_loss_raises_mmap_over_the_baseline() {
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let flows = list("DISPFLOW_MOTION_FLOWS", "oracle", |s| match s {
-        "oracle" => MotionFlow::Oracle,
-        "tvl1" => MotionFlow::Tvl1,
-        _ => panic!("DISPFLOW_MOTION_FLOWS: oracle or tvl1, not {s}"),
-    });
+    let flows = list("DISPFLOW_MOTION_FLOWS", "oracle", |s| (s.to_string(), parse_flow(s)));
     let weights = list("DISPFLOW_MOTION_WEIGHTS", "1", |s| {
         s.parse::<f32>().unwrap()
     });
@@ -85,11 +106,14 @@ fn motion_loss_raises_mmap_over_the_baseline() {
         "baseline: PSNR {:.3} MMAP {:.4} DRC {:.4} (optical-flow MMAP {:.4})",
         base.psnr, base.mmap, base.drc, base.flow_mmap
     );
-    for &flow in &flows {
+    for (name, (flow, sm)) in &flows {
+        let flow = *flow;
         for &w in &weights {
-            let m = train(&ds, &config(w, flow));
+            let mut c = config(w, flow);
+            c.scene_motion = sm.clone();
+            let m = train(&ds, &c);
             eprintln!(
-                "{flow:?} α={w}: PSNR {:.3} MMAP {:.4} DRC {:.4}",
+                "{name} α={w}: PSNR {:.3} MMAP {:.4} DRC {:.4}",
                 m.psnr, m.mmap, m.drc
             );
             if flow == MotionFlow::Oracle {

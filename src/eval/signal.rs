@@ -23,7 +23,7 @@ use crate::kernels::raster::RenderOpts;
 use crate::train::checkpoint::{write_atomic, Checkpoint};
 use crate::train::cli::load_options;
 use crate::train::config::SceneMotionConfig;
-use crate::train::frames::{attach_gt_flow, GpuFrame};
+use crate::train::frames::{attach_gt_flow, attach_masks, GpuFrame};
 use crate::train::passes::motion::{OpticalFlow, OracleFlow};
 use crate::train::passes::{
     DeformPass, MotionPair, OverflowWatch, RenderPass, SceneMotion, SceneSignal, Slot,
@@ -227,6 +227,7 @@ pub fn run_signal(a: &SignalArgs) -> Result<Vec<SignalScores>> {
         let c = Checkpoint::load(path)?;
         tr.restore(&c)
             .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+        attach_masks(&gpu, &mut tr.frames, &ds)?;
         let oracle = attach_gt_flow(&gpu, &mut tr.frames, &ds).is_ok();
         let s = score(&gpu, &mut tr, a, oracle, &path.display().to_string())?;
         eprintln!(

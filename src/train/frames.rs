@@ -69,22 +69,9 @@ pub fn upload_frame(
         .chunks_exact(3)
         .map(|c| [c[0], c[1], c[2], 1.0])
         .collect();
-    let mask = match f.mask.as_ref().filter(|_| with_mask) {
-        Some(m) if m.len() == px => {
-            let words: Vec<u32> = m.iter().map(|&v| (v != 0) as u32).collect();
-            Some((
-                gpu.buffer_from(&format!("mask {}", f.id), &words)?,
-                m.clone(),
-            ))
-        }
-        Some(m) if !m.is_empty() => {
-            return Err(Error::Invalid(format!(
-                "{}: motion mask holds {} values, expected {px}",
-                f.image_path.display(),
-                m.len()
-            )))
-        }
-        _ => None,
+    let mask = match with_mask {
+        true => gpu_mask(gpu, f)?,
+        false => None,
     };
     Ok(GpuFrame {
         id: f.id.clone(),
@@ -136,6 +123,35 @@ pub fn upload_splits(gpu: &Gpu, data: &Dataset) -> Result<(Vec<GpuFrame>, Vec<Gp
             .collect::<Result<Vec<_>>>()
     };
     Ok((up(&data.train, false)?, up(&data.val, true)?))
+}
+
+/// The frame's motion mask on the GPU ([H·W] u32, moving = 1) with its host copy.
+fn gpu_mask(gpu: &Gpu, f: &Frame) -> Result<Option<(Buffer, Vec<u8>)>> {
+    let px = (f.image.width * f.image.height) as usize;
+    match f.mask.as_ref() {
+        Some(m) if m.len() == px => {
+            let words: Vec<u32> = m.iter().map(|&v| (v != 0) as u32).collect();
+            Ok(Some((
+                gpu.buffer_from(&format!("mask {}", f.id), &words)?,
+                m.clone(),
+            )))
+        }
+        Some(m) if !m.is_empty() => Err(Error::Invalid(format!(
+            "{}: motion mask holds {} values, expected {px}",
+            f.image_path.display(),
+            m.len()
+        ))),
+        _ => Ok(None),
+    }
+}
+
+/// Attaches each training frame's motion mask, when the dataset has one (probes that score
+/// training views; training itself never reads masks).
+pub fn attach_masks(gpu: &Gpu, frames: &mut [GpuFrame], data: &Dataset) -> Result<()> {
+    for (g, f) in frames.iter_mut().zip(&data.train) {
+        g.mask = gpu_mask(gpu, f)?;
+    }
+    Ok(())
 }
 
 /// Attaches each training frame's ground-truth scene flow (the oracle ablation), or says which
