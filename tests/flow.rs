@@ -534,6 +534,180 @@ fn bad_configuration_and_sizes_are_errors() {
     let est = TvL1Flow::new(&gpu, FlowConfig::fast()).unwrap();
     assert!(est.scratch(&gpu, 0, 5).is_err());
     assert!(est.scratch(&gpu, 5, 0).is_err());
+    // The prefilter and level knobs, by name.
+    for (bad, field) in [
+        (
+            FlowConfig {
+                texture: 1.0,
+                ..Default::default()
+            },
+            "texture",
+        ),
+        (
+            FlowConfig {
+                texture: -0.1,
+                ..Default::default()
+            },
+            "texture",
+        ),
+        (
+            FlowConfig {
+                finest: 5,
+                ..Default::default()
+            },
+            "finest",
+        ),
+        (
+            FlowConfig {
+                blur_a: 65,
+                ..Default::default()
+            },
+            "blur_a",
+        ),
+    ] {
+        let e = bad.validate().expect_err(field).to_string();
+        assert!(e.contains(field), "{e}");
+    }
+    // finest = 2 is valid, but a 20×12 image gets only 2 levels (min_size 8): the scratch
+    // says so.
+    let deep = TvL1Flow::new(
+        &gpu,
+        FlowConfig {
+            finest: 2,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let e = deep
+        .scratch(&gpu, 20, 12)
+        .err()
+        .expect("too deep")
+        .to_string();
+    assert!(e.contains("finest") && e.contains("20×12"), "{e}");
+    assert!(deep.scratch(&gpu, 64, 48).is_ok());
+}
+
+/// The prefilter and level knobs: GPU vs twin on identical inputs (bounds as `gpu_matches_twin`).
+#[test]
+fn knobs_match_twin() {
+    let base = FlowConfig {
+        warps: 3,
+        iterations: 20,
+        ..Default::default()
+    };
+    let knobs = [
+        FlowConfig { blur_a: 2, ..base },
+        FlowConfig {
+            texture: 0.8,
+            ..base
+        },
+        FlowConfig { finest: 1, ..base },
+        FlowConfig {
+            blur_a: 3,
+            texture: 0.5,
+            finest: 2,
+            ..base
+        },
+    ];
+    for cfg in knobs {
+        for (seed, w, h) in [(5u64, 17usize, 13usize), (6, 64, 48)] {
+            let (a, b, _) = translation(w, h, seed, [1.3, -0.8]);
+            let dims = dispflow_vk::kernels::flow::pyramid_dims(&cfg, w as u32, h as u32);
+            if cfg.finest as usize >= dims.len() {
+                continue;
+            }
+            let got = gpu_flow(cfg, w as u32, h as u32, &a, &b);
+            let want = tvl1_flow(&cfg, &a, &b, w, h);
+            let mean = epe(&got, &want, w, h, 0);
+            let max = got
+                .iter()
+                .zip(&want)
+                .map(|(g, t)| ((g[0] as f64 - t[0]).powi(2) + (g[1] as f64 - t[1]).powi(2)).sqrt())
+                .fold(0.0, f64::max);
+            eprintln!(
+                "blur {} texture {} finest {} {w}x{h}: GPU vs twin mean {mean:.2e} px, max {max:.2e} px",
+                cfg.blur_a, cfg.texture, cfg.finest
+            );
+            assert!(got.iter().all(|p| p[0].is_finite() && p[1].is_finite()));
+            assert!(
+                mean < 1e-4 && max < 1e-2,
+                "{cfg:?} {w}x{h}: mean {mean}, max {max}"
+            );
+        }
+    }
+}
+
+/// Blurs an image by `n` 5×5 binomial passes (clamped border): a render's blur.
+fn blur_image(img: &[[f32; 4]], w: usize, h: usize, n: usize) -> Vec<[f32; 4]> {
+    const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+    let mut cur = img.to_vec();
+    for _ in 0..n {
+        let src = cur.clone();
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = [0f32; 4];
+                for (j, kj) in K.iter().enumerate() {
+                    for (i, ki) in K.iter().enumerate() {
+                        let xx = (x as i64 + i as i64 - 2).clamp(0, w as i64 - 1) as usize;
+                        let yy = (y as i64 + j as i64 - 2).clamp(0, h as i64 - 1) as usize;
+                        for c in 0..3 {
+                            acc[c] += ki * kj * src[yy * w + xx][c];
+                        }
+                    }
+                }
+                acc[3] = 1.0;
+                cur[y * w + x] = acc;
+            }
+        }
+    }
+    cur
+}
+
+/// The knobs on the pairs they are for, each against plain TV-L1 on the same pair (EPE, GPU):
+/// a sharp photo against a blurred, shifted render (blur_a), a shifted render with different
+/// shading (texture), and a coarser solve on a plain translation (finest = 1).
+#[test]
+fn knobs_help_where_they_should() {
+    let (w, h) = (96usize, 72usize);
+    let run = |cfg: FlowConfig, a: &[[f32; 4]], b: &[[f32; 4]], gt: &[[f64; 2]]| {
+        epe(&gpu_flow(cfg, w as u32, h as u32, a, b), gt, w, h, MARGIN)
+    };
+    let plain = FlowConfig::default();
+    // Blur: b is the translated texture blurred by 3 passes (σ ≈ 1.7 px).
+    let (a, b, gt) = translation(w, h, 41, [1.6, 0.7]);
+    let bb = blur_image(&b, w, h, 3);
+    let (e0, e3) = (
+        run(plain, &a, &bb, &gt),
+        run(FlowConfig { blur_a: 3, ..plain }, &a, &bb, &gt),
+    );
+    eprintln!("sharp → blurred render: EPE plain {e0:.4} px, blur_a 3 {e3:.4} px");
+    assert!(e3 < e0, "blur_a 3: {e3} vs plain {e0}");
+    // Shading: b has a smooth brightness ramp and a gain the render has not learnt.
+    let (a, b, gt) = translation(w, h, 42, [1.2, -0.9]);
+    let shaded: Vec<[f32; 4]> = b
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            let s = 0.85 + 0.25 * (x / w as f32) + 0.1 * (y / h as f32);
+            [p[0] * s + 0.05, p[1] * s + 0.05, p[2] * s + 0.05, 1.0]
+        })
+        .collect();
+    let tex = FlowConfig {
+        texture: 0.8,
+        ..plain
+    };
+    let (e0, et) = (run(plain, &a, &shaded, &gt), run(tex, &a, &shaded, &gt));
+    eprintln!("shaded render: EPE plain {e0:.4} px, texture 0.8 {et:.4} px");
+    assert!(et < e0, "texture 0.8: {et} vs plain {e0}");
+    // Level 1: a translation is still recovered, within a coarse bound.
+    let (a, b, gt) = translation(w, h, 43, [2.3, -1.7]);
+    let (e0, e1) = (
+        run(plain, &a, &b, &gt),
+        run(FlowConfig { finest: 1, ..plain }, &a, &b, &gt),
+    );
+    eprintln!("translation: EPE full resolution {e0:.4} px, finest level 1 {e1:.4} px");
+    assert!(e1 < 0.25, "finest 1: EPE {e1}");
 }
 
 /// The speed/accuracy knob: GPU time (timestamps, this device) and EPE per preset on one
@@ -549,11 +723,20 @@ fn speed_accuracy_table() {
         ("non-rigid", nonrigid(w, h, 33)),
     ];
     eprintln!(
-        "preset    levels warps iters | GPU ms (per pair) | EPE translation rotation non-rigid"
+        "preset         levels warps iters | GPU ms (per pair) | EPE translation rotation non-rigid"
     );
     let mut rows = Vec::new();
-    for name in ["fast", "default", "accurate"] {
-        let cfg = FlowConfig::preset(name).unwrap();
+    let knobs: [(&str, fn(&mut FlowConfig)); 6] = [
+        ("fast", |_| ()),
+        ("default", |_| ()),
+        ("accurate", |_| ()),
+        ("default+level1", |c| c.finest = 1),
+        ("default+blur2", |c| c.blur_a = 2),
+        ("default+tex0.8", |c| c.texture = 0.8),
+    ];
+    for (name, knob) in knobs {
+        let mut cfg = FlowConfig::preset(name.split('+').next().unwrap()).unwrap();
+        knob(&mut cfg);
         let mut ms = 0.0;
         let mut e = Vec::new();
         for (_, (a, b, gt)) in &pairs {
@@ -562,13 +745,13 @@ fn speed_accuracy_table() {
             e.push(epe(&f, gt, w, h, MARGIN));
         }
         eprintln!(
-            "{name:9} {:6} {:5} {:5} | {ms:17.2} | {:15.4} {:8.4} {:9.4}",
+            "{name:14} {:6} {:5} {:5} | {ms:17.2} | {:15.4} {:8.4} {:9.4}",
             cfg.levels, cfg.warps, cfg.iterations, e[0], e[1], e[2]
         );
         rows.push(e);
     }
     assert!(
-        rows[2][0] < rows[0][0] && rows.iter().flatten().all(|e| *e < 0.25),
+        rows[2][0] < rows[0][0] && rows[..3].iter().flatten().all(|e| *e < 0.25),
         "EPE per preset: {rows:?}"
     );
 }

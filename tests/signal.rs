@@ -68,7 +68,10 @@ fn signal_scores_every_kept_checkpoint() {
             assert!((0.0..=1.0).contains(v), "{name}: {v}");
         }
         let oracle = c.oracle.expect("the synthetic scene has ground-truth flow");
-        assert!(oracle > 0.9, "ground-truth flow vs its own masks: AP {oracle}");
+        assert!(
+            oracle > 0.9,
+            "ground-truth flow vs its own masks: AP {oracle}"
+        );
         assert!((0.0..=1.0).contains(&c.model_delta));
         assert!((0.0..=1.0).contains(&c.confidence_in) && (0.0..=1.0).contains(&c.confidence_out));
     }
@@ -92,7 +95,10 @@ fn scene_motion_knobs_are_checked_by_name() {
     assert!(with(&|a| a.motion_residual = Some(true)).is_ok());
     let cases: [(&dyn Fn(&mut TrainArgs), &str); 5] = [
         (&|a| a.motion_every = Some(0), "scene_motion.every"),
-        (&|a| a.motion_confidence = Some(-1.0), "scene_motion.confidence"),
+        (
+            &|a| a.motion_confidence = Some(-1.0),
+            "scene_motion.confidence",
+        ),
         (&|a| a.flow_texture = Some(1.0), "scene_motion.texture"),
         (
             &|a| {

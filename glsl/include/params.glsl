@@ -302,7 +302,7 @@ struct FlowParams {
     float lambda_theta; // λ·θ: threshold of the data step
     float theta;        // θ
     float tau_theta;    // τ/θ: dual step
-    float pad0;
+    float mix;          // prefilter: 0 = dst = blur(src); β = dst = dst − β·blur(src)
 };
 
 // src/kernels/motion.rs — magnitude of a per-pixel vector field and its normalisation over the

@@ -8,6 +8,11 @@
 //! Stages, in recording order:
 //! 1. `grey`: RGB → `GREY_SCALE · (0.299 r + 0.587 g + 0.114 b)` (intensities in [0, 255], so
 //!    λ has its usual literature scale), for `a` (I0) and `b` (I1).
+//! 1b. `prefilter` (optional, full resolution): `blur_a` binomial blur passes of I0 only (a
+//!    sharp photo against a blurry render: σ = √blur_a px), then, with `texture` = β > 0, both
+//!    planes become `I − β·S(I)`, `S` = [`TEXTURE_PASSES`] blur passes: the texture part of a
+//!    structure–texture split (classically S is a ROF/TV denoising; a Gaussian structure is
+//!    the cheap stand-in), which drops the shading a render has not learnt yet.
 //! 2. `downsample` per level: 5×5 binomial blur ([1 4 6 4 1]/16 separable, clamped border)
 //!    sampled at even pixels; a level is `ceil(w/2) × ceil(h/2)` of the finer one; the pyramid
 //!    stops after `levels` levels or when a level's smaller side would drop below `min_size`.
@@ -19,6 +24,8 @@
 //!    `p = (p + τ/θ·∇u) / (1 + τ/θ·|∇u|)` (forward differences, zero at the far border).
 //!    The GPU does one iteration per dispatch, ping-ponging (u, p): each invocation recomputes
 //!    the new u of its +x and +y neighbours to get ∇u, so an iteration is a single pass.
+//!    With `finest` = L > 0 the solve stops after level L and the flow is brought to full
+//!    resolution by `upsample` alone (about 4^L times less work on the finest levels).
 //! 4. The level-0 flow is copied to the caller's buffer.
 //!
 //! No median filtering and no stopping criterion (fixed work, no readback). Flat or textureless
@@ -36,6 +43,8 @@ use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
 pub const GREY_SCALE: f32 = 255.0;
 /// Below this |∇I1|² the data step leaves v = u (mirrored in glsl/flow/flow.glsl).
 pub const FLOW_GRAD_EPS: f32 = 1e-6;
+/// Blur passes of the structure S(I) in the texture prefilter (σ = 2 px).
+pub const TEXTURE_PASSES: u32 = 4;
 
 /// TV-L1 settings: the speed/accuracy knob is `levels`, `warps` and `iterations`
 /// (work ≈ 4/3 · H·W · warps · iterations).
@@ -55,6 +64,12 @@ pub struct FlowConfig {
     pub tau: f32,
     /// Coupling θ between u and v (> 0). Default 0.3.
     pub theta: f32,
+    /// Binomial blur passes on the full-resolution I0 (image `a`) before the pyramid. Default 0.
+    pub blur_a: u32,
+    /// Structure–texture factor β in [0, 1): both images become `I − β·S(I)`. Default 0 (off).
+    pub texture: f32,
+    /// Finest level solved (0 = full resolution); must be below the levels the image gets.
+    pub finest: u32,
 }
 
 impl Default for FlowConfig {
@@ -67,6 +82,9 @@ impl Default for FlowConfig {
             lambda: 0.15,
             tau: 0.25,
             theta: 0.3,
+            blur_a: 0,
+            texture: 0.0,
+            finest: 0,
         }
     }
 }
@@ -129,12 +147,32 @@ impl FlowConfig {
         if !(self.theta.is_finite() && self.theta > 0.0) {
             return bad("theta must be finite and > 0");
         }
+        if !(0.0..1.0).contains(&self.texture) {
+            return bad("texture must be in [0, 1)");
+        }
+        if self.finest >= self.levels {
+            return bad("finest must be below levels");
+        }
+        if self.blur_a > 64 {
+            return bad("blur_a must be at most 64 passes");
+        }
         Ok(())
     }
 
-    /// `tvl1` dispatches (one per iteration) over all levels for an image of this size.
+    /// `tvl1` dispatches (one per iteration) over the solved levels for an image of this size.
     pub fn iteration_dispatches(&self, width: u32, height: u32) -> u32 {
-        pyramid_dims(self, width, height).len() as u32 * self.warps * self.iterations
+        let levels = pyramid_dims(self, width, height).len() as u32;
+        levels.saturating_sub(self.finest) * self.warps * self.iterations
+    }
+
+    /// Prefilter blur passes per flow (both planes counted).
+    pub fn prefilter_passes(&self) -> u32 {
+        self.blur_a
+            + if self.texture > 0.0 {
+                2 * TEXTURE_PASSES
+            } else {
+                0
+            }
     }
 }
 
@@ -168,7 +206,8 @@ pub struct FlowParams {
     pub lambda_theta: f32,
     pub theta: f32,
     pub tau_theta: f32,
-    pub pad0: f32,
+    /// prefilter: 0 = dst = blur(src); β = dst = dst − β·blur(src).
+    pub mix: f32,
 }
 
 /// A dense optical-flow estimator recorded into a command buffer. Object safe, so a learned
@@ -207,6 +246,8 @@ pub struct FlowScratch {
     warp: Buffer,
     u: [Buffer; 2],
     p: [Buffer; 2],
+    /// Prefilter ping-pong planes ([H·W] f32; 4 bytes when no prefilter is configured).
+    tmp: [Buffer; 2],
 }
 
 impl FlowScratch {
@@ -214,7 +255,8 @@ impl FlowScratch {
     pub fn buffers(&self) -> Vec<&Buffer> {
         let [u0, u1] = &self.u;
         let [p0, p1] = &self.p;
-        vec![&self.pyr, &self.grad, &self.warp, u0, u1, p0, p1]
+        let [t0, t1] = &self.tmp;
+        vec![&self.pyr, &self.grad, &self.warp, u0, u1, p0, p1, t0, t1]
     }
 
     /// Pyramid level sizes, finest first.
@@ -232,6 +274,7 @@ pub struct TvL1Flow {
     warp: ComputePipeline,
     tvl1: ComputePipeline,
     upsample: ComputePipeline,
+    prefilter: ComputePipeline,
 }
 
 impl TvL1Flow {
@@ -246,6 +289,7 @@ impl TvL1Flow {
             warp: gpu.pipeline(&f::WARP)?,
             tvl1: gpu.pipeline(&f::TVL1)?,
             upsample: gpu.pipeline(&f::UPSAMPLE)?,
+            prefilter: gpu.pipeline(&f::PREFILTER)?,
         })
     }
 }
@@ -271,6 +315,16 @@ impl FlowEstimator for TvL1Flow {
             });
         }
         let dims = pyramid_dims(&self.cfg, width, height);
+        if self.cfg.finest as usize >= dims.len() {
+            return Err(Error::Invalid(format!(
+                "flow config: finest = {} but a {width}×{height} image gets {} pyramid levels \
+                 (levels {}, min_size {}); finest must be below that",
+                self.cfg.finest,
+                dims.len(),
+                self.cfg.levels,
+                self.cfg.min_size
+            )));
+        }
         let mut offsets = Vec::new();
         let mut off = 0u64;
         for &(w, h) in &dims {
@@ -295,6 +349,17 @@ impl FlowEstimator for TvL1Flow {
                 gpu.buffer("flow p ping", hw * 16)?,
                 gpu.buffer("flow p pong", hw * 16)?,
             ],
+            tmp: {
+                let bytes = if self.cfg.prefilter_passes() > 0 {
+                    hw * 4
+                } else {
+                    4
+                };
+                [
+                    gpu.buffer("flow prefilter ping", bytes)?,
+                    gpu.buffer("flow prefilter pong", bytes)?,
+                ]
+            },
         })
     }
 
@@ -342,6 +407,7 @@ impl FlowEstimator for TvL1Flow {
             &[a, b, s.pyr.all()],
             [w, h, 1],
         );
+        self.record_prefilter(rec, s);
         for l in 1..s.dims.len() {
             let (sw, sh) = s.dims[l - 1];
             let (so0, so1) = s.offsets[l - 1];
@@ -367,7 +433,8 @@ impl FlowEstimator for TvL1Flow {
         rec.fill(s.u[0].slice(0, top_px * 8), 0);
         rec.fill(s.p[0].slice(0, top_px * 16), 0);
         let mut cur = 0usize;
-        for l in (0..=top).rev() {
+        let finest = cfg.finest as usize;
+        for l in (finest..=top).rev() {
             let d = s.dims[l];
             let (lo0, lo1) = s.offsets[l];
             if l < top {
@@ -424,9 +491,76 @@ impl FlowEstimator for TvL1Flow {
                 }
             }
         }
+        // Levels below `finest`: bilinear upsampling only.
+        for l in (0..finest).rev() {
+            let (cw, ch) = s.dims[l + 1];
+            let d = s.dims[l];
+            rec.dispatch_threads(
+                &self.upsample,
+                &FlowParams {
+                    src_width: cw,
+                    src_height: ch,
+                    ..pc(d)
+                },
+                &[
+                    s.u[cur].all(),
+                    s.p[cur].all(),
+                    s.u[1 - cur].all(),
+                    s.p[1 - cur].all(),
+                ],
+                [d.0, d.1, 1],
+            );
+            cur = 1 - cur;
+        }
         rec.copy(
             s.u[cur].slice(0, hw * 8),
             flow.buf.slice(flow.offset, hw * 8),
         );
+    }
+}
+
+impl TvL1Flow {
+    /// The full-resolution prefilters of the grey planes (stage 1b): `blur_a` passes on I0,
+    /// then the texture split of both planes.
+    fn record_prefilter(&self, rec: &mut Recorder<'_>, s: &FlowScratch) {
+        let (w, h) = (s.width, s.height);
+        let hw = w as u64 * h as u64;
+        let (o0, o1) = s.offsets[0];
+        let pass = |rec: &mut Recorder<'_>, src: BufSlice<'_>, dst: (&Buffer, u32), mix: f32| {
+            let p = FlowParams {
+                width: w,
+                height: h,
+                off2: dst.1,
+                mix,
+                ..Default::default()
+            };
+            rec.dispatch_threads(&self.prefilter, &p, &[src, dst.0.all()], [w, h, 1]);
+        };
+        // `n` blur passes of the plane at `off`: copied out, ping-ponged, and the last pass
+        // writes the plane back (`mix` = 0) or subtracts β times it (the texture split).
+        let chain = |rec: &mut Recorder<'_>, off: u32, n: u32, mix: f32| {
+            rec.copy(
+                s.pyr.slice(off as u64 * 4, hw * 4),
+                s.tmp[0].slice(0, hw * 4),
+            );
+            let mut cur = 0;
+            for k in 0..n {
+                let src = s.tmp[cur].all();
+                if k + 1 == n {
+                    pass(rec, src, (&s.pyr, off), mix);
+                } else {
+                    pass(rec, src, (&s.tmp[1 - cur], 0), 0.0);
+                    cur = 1 - cur;
+                }
+            }
+        };
+        if self.cfg.blur_a > 0 {
+            chain(rec, o0, self.cfg.blur_a, 0.0);
+        }
+        if self.cfg.texture > 0.0 {
+            for off in [o0, o1] {
+                chain(rec, off, TEXTURE_PASSES, self.cfg.texture);
+            }
+        }
     }
 }

@@ -103,7 +103,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             lambda_theta,
             theta,
             tau_theta,
-            pad0
+            mix
         ),
         layout!(scan::ScanParams, capacity, level, num_levels, pad),
         layout!(radix_sort::SortParams, capacity, shift, digit_mask, pad),

@@ -3,7 +3,7 @@
 //! Same stages, same iteration counts and the same update order as the GPU (see
 //! `kernels::flow` for the algorithm and its conventions); plain loops.
 
-use crate::kernels::flow::{pyramid_dims, FlowConfig, FLOW_GRAD_EPS, GREY_SCALE};
+use crate::kernels::flow::{pyramid_dims, FlowConfig, FLOW_GRAD_EPS, GREY_SCALE, TEXTURE_PASSES};
 
 /// A planar f64 image.
 #[derive(Clone, Debug)]
@@ -70,6 +70,41 @@ fn downsample(src: &Plane, w: usize, h: usize) -> Plane {
         }
     }
     Plane { w, h, v }
+}
+
+/// One 5×5 binomial blur pass, clamped border, same size (glsl/flow/prefilter.comp).
+fn blur(src: &Plane) -> Plane {
+    const K: [f64; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+    let (w, h) = (src.w, src.h);
+    let mut v = vec![0.0; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = 0.0;
+            for (j, kj) in K.iter().enumerate() {
+                let mut row = 0.0;
+                for (i, ki) in K.iter().enumerate() {
+                    row += ki * src.clamped(x as i64 + i as i64 - 2, y as i64 + j as i64 - 2);
+                }
+                acc += kj * row;
+            }
+            v[y * w + x] = acc;
+        }
+    }
+    Plane { w, h, v }
+}
+
+/// `n` blur passes.
+fn blurred(p: &Plane, n: u32) -> Plane {
+    (0..n).fold(p.clone(), |q, _| blur(&q))
+}
+
+/// The texture part `I − β·S(I)`, `S` = [`TEXTURE_PASSES`] blur passes.
+fn texture(p: &Plane, beta: f64) -> Plane {
+    let s = blurred(p, TEXTURE_PASSES);
+    Plane {
+        v: p.v.iter().zip(&s.v).map(|(a, b)| a - beta * b).collect(),
+        ..s
+    }
 }
 
 /// Central differences, clamped at the border (glsl/flow/gradient.comp).
@@ -247,8 +282,19 @@ pub fn tvl1_flow(
         "NaN/Inf in a flow input image"
     );
     let dims = pyramid_dims(cfg, w as u32, h as u32);
-    let mut i0 = vec![grey(a, w, h)];
-    let mut i1 = vec![grey(b, w, h)];
+    assert!(
+        (cfg.finest as usize) < dims.len(),
+        "finest below the levels"
+    );
+    let (mut g0, mut g1) = (blurred(&grey(a, w, h), cfg.blur_a), grey(b, w, h));
+    if cfg.texture > 0.0 {
+        (g0, g1) = (
+            texture(&g0, cfg.texture as f64),
+            texture(&g1, cfg.texture as f64),
+        );
+    }
+    let mut i0 = vec![g0];
+    let mut i1 = vec![g1];
     for &(lw, lh) in &dims[1..] {
         let (lw, lh) = (lw as usize, lh as usize);
         let n0 = downsample(i0.last().unwrap(), lw, lh);
@@ -265,6 +311,9 @@ pub fn tvl1_flow(
         if l < top {
             let c = (dims[l + 1].0 as usize, dims[l + 1].1 as usize);
             (u, p) = upsample(&u, &p, c, (lw, lh));
+        }
+        if l < cfg.finest as usize {
+            continue; // below the finest solved level: upsampling only
         }
         let g = gradient(&i1[l]);
         for _ in 0..cfg.warps {

@@ -222,8 +222,12 @@ impl SceneMotionConfig {
         &self,
         preset: &str,
     ) -> crate::error::Result<crate::kernels::flow::FlowConfig> {
-        // MERGE: blur_a/texture/finest once the flow branch lands.
-        let c = crate::kernels::flow::FlowConfig::preset(preset)?;
+        let c = crate::kernels::flow::FlowConfig {
+            blur_a: self.blur_photo,
+            texture: self.texture,
+            finest: self.level,
+            ..crate::kernels::flow::FlowConfig::preset(preset)?
+        };
         c.validate()?;
         Ok(c)
     }
