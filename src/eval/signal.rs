@@ -20,7 +20,7 @@ use crate::kernels::flow::FlowConfig;
 use crate::kernels::metrics::{MetricBuffers, MotionMetrics};
 use crate::kernels::motion::{MotionNorm, NormBuffers, NormConfig};
 use crate::kernels::raster::RenderOpts;
-use crate::train::checkpoint::{write_atomic, Checkpoint};
+use crate::train::checkpoint::{is_kept_checkpoint, write_atomic, Checkpoint};
 use crate::train::cli::load_options;
 use crate::train::config::SceneMotionConfig;
 use crate::train::frames::{attach_gt_flow, attach_masks, GpuFrame};
@@ -87,6 +87,12 @@ pub fn variants() -> Vec<Variant> {
         v("photo → render t2 (raw)", m(&|_| ()), "default", false),
         v("raw, fast flow", m(&|_| ()), "fast", false),
         v("raw, level 1", m(&|c| c.level = 1), "default", false),
+        v(
+            "raw, fast flow, level 1",
+            m(&|c| c.level = 1),
+            "fast",
+            false,
+        ),
         v(
             "raw, blur photo 2",
             m(&|c| c.blur_photo = 2),
@@ -261,11 +267,7 @@ fn checkpoints(a: &SignalArgs) -> Result<Vec<PathBuf>> {
             source,
         })?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.extension().is_some_and(|x| x == "ckpt")
-                && p.file_stem()
-                    .is_some_and(|s| s.to_string_lossy().bytes().all(|b| b.is_ascii_digit()))
-        })
+        .filter(|p| is_kept_checkpoint(p))
         .collect();
     kept.sort();
     if kept.is_empty() {

@@ -383,6 +383,22 @@ pub fn last_checkpoint(out_dir: &Path) -> PathBuf {
     out_dir.join("checkpoints").join("last.ckpt")
 }
 
+/// `DIR/checkpoints/NNNNNN.ckpt`: a checkpoint kept by `--keep-checkpoints`.
+pub fn kept_checkpoint(out_dir: &Path, iteration: u32) -> PathBuf {
+    out_dir
+        .join("checkpoints")
+        .join(format!("{iteration:06}.ckpt"))
+}
+
+/// Whether `p` is named like a kept checkpoint (digits, then `.ckpt`).
+pub fn is_kept_checkpoint(p: &Path) -> bool {
+    p.extension().is_some_and(|x| x == "ckpt")
+        && p.file_stem().is_some_and(|s| {
+            let s = s.to_string_lossy();
+            !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit())
+        })
+}
+
 /// Writes canonical Gaussians as the standard 3DGS PLY (binary little endian): x y z, nx ny nz
 /// (zeros), f_dc_0..2, f_rest_* (channel-major, as 3DGS stores them), opacity (logit),
 /// scale_0..2 (log), rot_0..3 (w x y z). Common splat viewers read this layout.

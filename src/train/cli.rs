@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use super::checkpoint::{last_checkpoint, write_atomic, write_ply, Checkpoint};
+use super::checkpoint::{kept_checkpoint, last_checkpoint, write_atomic, write_ply, Checkpoint};
 use super::config::{Background, Preset, TrainConfig};
 use super::outputs::{last_wall_s, remove_stale_outputs, truncate_log};
 pub use super::outputs::{save_side_by_side, write_dynamic_masks, LogLine};
@@ -324,7 +324,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         })?;
     }
     std::fs::create_dir_all(out.join("checkpoints")).map_err(io(&out))?;
-    remove_stale_outputs(&out)?;
+    remove_stale_outputs(&out, !resume)?;
     let log_path = out.join("log.jsonl");
     if resume {
         // Lines logged after the checkpoint are logged again by the resumed run.

@@ -53,7 +53,7 @@ fn one() -> f64 {
 /// Before training: removes what a killed run can leave behind (`*.tmp` files of interrupted
 /// atomic writes) and `metrics.json`, the mark of a finished run, which is written again
 /// last, so a run killed from here on never looks finished.
-pub(crate) fn remove_stale_outputs(out: &Path) -> Result<()> {
+pub(crate) fn remove_stale_outputs(out: &Path, fresh: bool) -> Result<()> {
     for dir in [
         out.to_path_buf(),
         out.join("checkpoints"),
@@ -64,7 +64,10 @@ pub(crate) fn remove_stale_outputs(out: &Path) -> Result<()> {
         };
         for e in entries.flatten() {
             let p = e.path();
-            if p.extension().is_some_and(|x| x == "tmp") && p.is_file() {
+            // A fresh run also drops an earlier run's kept checkpoints (`NNNNNN.ckpt`):
+            // `signal` would score another run's models.
+            let kept = super::checkpoint::is_kept_checkpoint(&p);
+            if (p.extension().is_some_and(|x| x == "tmp") || (fresh && kept)) && p.is_file() {
                 std::fs::remove_file(&p).map_err(io(&p))?;
             }
         }
