@@ -492,10 +492,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
             let c = tr.checkpoint()?;
             c.save(&ckpt)?;
             if cfg.keep_checkpoints {
-                c.save(
-                    &out.join("checkpoints")
-                        .join(format!("{:06}.ckpt", tr.iteration)),
-                )?;
+                c.save(&kept_checkpoint(&out, tr.iteration))?;
             }
         }
     }
