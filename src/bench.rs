@@ -20,6 +20,7 @@ use crate::vk::{Buffer, Gpu, Recorder, Timings};
 mod lpips_case;
 mod mlp_case;
 pub mod mlp_table;
+pub mod motion;
 pub mod raster_scenes;
 pub mod sparsity;
 pub mod step;
@@ -405,6 +406,9 @@ pub enum Suite {
     /// The training step with the MLP over every Gaussian against split models (50, 20, 5,
     /// 0 % dynamic), per zone.
     Sparsity,
+    /// The DispFlow step with each scene-motion option (flow preset, level, blur, texture,
+    /// residual, confidence) next to the baseline step, per zone.
+    Motion,
 }
 
 #[derive(clap::Args, Debug)]
@@ -595,6 +599,10 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
     }
     if has(Suite::Sparsity) {
         let st = sparsity::run_sparsity_bench(&gpu, args.warm_steps, args.steps)?;
+        rows.extend(step::report(&gpu, &st, args.reps)?);
+    }
+    if has(Suite::Motion) {
+        let st = motion::run_motion_bench(&gpu, args.warm_steps, args.steps)?;
         rows.extend(step::report(&gpu, &st, args.reps)?);
     }
     if has(Suite::Lpips) {
