@@ -11,30 +11,11 @@ use dispflow_vk::report::Table;
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::read_ply;
 use dispflow_vk::train::cli::TrainArgs;
-use train_common::tiny_scene;
-
-/// 60 iterations on the tiny scene: deformation from 20, motion term from 40, densification.
-const TINY_TOML: &str = r#"
-iterations = 60
-mlp_width = 16
-mlp_depth = 2
-warm_up = 20
-motion_start = 40
-flow_preset = "fast"
-sh_degree = 1
-sh_interval = 30
-log_interval = 10
-checkpoint_interval = 60
-[densify]
-from = 20
-until = 50
-interval = 25
-budget = 8000
-"#;
+use train_common::{tiny_scene, tiny_toml};
 
 fn train(data: &Path, out: &Path, motion_weight: f32) -> PathBuf {
     let cfg = out.with_extension("toml");
-    std::fs::write(&cfg, TINY_TOML).unwrap();
+    std::fs::write(&cfg, tiny_toml(60)).unwrap();
     let a = TrainArgs {
         data: Some(data.to_path_buf()),
         out: Some(out.to_path_buf()),

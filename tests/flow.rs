@@ -190,6 +190,14 @@ fn epe<F: Copy + Into<f64>>(
     s / n as f64
 }
 
+/// Largest end-point difference between a GPU flow and the twin's.
+fn max_diff(got: &[[f32; 2]], want: &[[f64; 2]]) -> f64 {
+    got.iter()
+        .zip(want)
+        .map(|(g, t)| ((g[0] as f64 - t[0]).powi(2) + (g[1] as f64 - t[1]).powi(2)).sqrt())
+        .fold(0.0, f64::max)
+}
+
 fn to_f64(f: &[[f32; 2]]) -> Vec<[f64; 2]> {
     f.iter().map(|p| p.map(f64::from)).collect()
 }
@@ -214,12 +222,7 @@ fn gpu_matches_twin() {
         let (a, b, _) = translation(w, h, seed, [1.3, -0.8]);
         let got = gpu_flow(cfg, w as u32, h as u32, &a, &b);
         let want = tvl1_flow(&cfg, &a, &b, w, h);
-        let mean = epe(&got, &want, w, h, 0);
-        let max = got
-            .iter()
-            .zip(&want)
-            .map(|(g, t)| ((g[0] as f64 - t[0]).powi(2) + (g[1] as f64 - t[1]).powi(2)).sqrt())
-            .fold(0.0, f64::max);
+        let (mean, max) = (epe(&got, &want, w, h, 0), max_diff(&got, &want));
         eprintln!("{w}x{h}: GPU vs twin mean |Δ| {mean:.2e} px, max {max:.2e} px");
         assert!(got.iter().all(|p| p[0].is_finite() && p[1].is_finite()));
         assert!(mean < 1e-4 && max < 1e-2, "{w}x{h}: mean {mean}, max {max}");
@@ -618,12 +621,7 @@ fn knobs_match_twin() {
             }
             let got = gpu_flow(cfg, w as u32, h as u32, &a, &b);
             let want = tvl1_flow(&cfg, &a, &b, w, h);
-            let mean = epe(&got, &want, w, h, 0);
-            let max = got
-                .iter()
-                .zip(&want)
-                .map(|(g, t)| ((g[0] as f64 - t[0]).powi(2) + (g[1] as f64 - t[1]).powi(2)).sqrt())
-                .fold(0.0, f64::max);
+            let (mean, max) = (epe(&got, &want, w, h, 0), max_diff(&got, &want));
             eprintln!(
                 "blur {} texture {} finest {} {w}x{h}: GPU vs twin mean {mean:.2e} px, max {max:.2e} px",
                 cfg.blur_a, cfg.texture, cfg.finest

@@ -7,25 +7,7 @@ mod train_common;
 
 use dispflow_vk::eval::signal::{run_signal, variants, SignalArgs};
 use dispflow_vk::train::cli::{resolve_config, TrainArgs};
-use train_common::tiny_scene;
-
-const TOML: &str = r#"
-iterations = 60
-mlp_width = 16
-mlp_depth = 2
-warm_up = 20
-motion_start = 40
-flow_preset = "fast"
-sh_degree = 1
-sh_interval = 30
-log_interval = 10
-checkpoint_interval = 30
-[densify]
-from = 20
-until = 50
-interval = 25
-budget = 8000
-"#;
+use train_common::{tiny_scene, tiny_toml};
 
 #[test]
 fn signal_scores_every_kept_checkpoint() {
@@ -33,7 +15,7 @@ fn signal_scores_every_kept_checkpoint() {
     let data = tiny_scene(tmp.path());
     let out = tmp.path().join("run");
     let cfg = tmp.path().join("run.toml");
-    std::fs::write(&cfg, TOML).unwrap();
+    std::fs::write(&cfg, tiny_toml(30)).unwrap();
     let a = TrainArgs {
         data: Some(data),
         out: Some(out.clone()),

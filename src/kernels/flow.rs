@@ -438,23 +438,7 @@ impl FlowEstimator for TvL1Flow {
             let d = s.dims[l];
             let (lo0, lo1) = s.offsets[l];
             if l < top {
-                let (cw, ch) = s.dims[l + 1];
-                rec.dispatch_threads(
-                    &self.upsample,
-                    &FlowParams {
-                        src_width: cw,
-                        src_height: ch,
-                        ..pc(d)
-                    },
-                    &[
-                        s.u[cur].all(),
-                        s.p[cur].all(),
-                        s.u[1 - cur].all(),
-                        s.p[1 - cur].all(),
-                    ],
-                    [d.0, d.1, 1],
-                );
-                cur = 1 - cur;
+                cur = self.record_upsample(rec, s, l, cur);
             }
             let lp = FlowParams {
                 off0: lo0,
@@ -493,24 +477,7 @@ impl FlowEstimator for TvL1Flow {
         }
         // Levels below `finest`: bilinear upsampling only.
         for l in (0..finest).rev() {
-            let (cw, ch) = s.dims[l + 1];
-            let d = s.dims[l];
-            rec.dispatch_threads(
-                &self.upsample,
-                &FlowParams {
-                    src_width: cw,
-                    src_height: ch,
-                    ..pc(d)
-                },
-                &[
-                    s.u[cur].all(),
-                    s.p[cur].all(),
-                    s.u[1 - cur].all(),
-                    s.p[1 - cur].all(),
-                ],
-                [d.0, d.1, 1],
-            );
-            cur = 1 - cur;
+            cur = self.record_upsample(rec, s, l, cur);
         }
         rec.copy(
             s.u[cur].slice(0, hw * 8),
@@ -520,6 +487,33 @@ impl FlowEstimator for TvL1Flow {
 }
 
 impl TvL1Flow {
+    /// `upsample` of (u, p) from level `l + 1` into level `l`, ping-pong slot `cur` → the
+    /// returned one.
+    fn record_upsample(
+        &self,
+        rec: &mut Recorder<'_>,
+        s: &FlowScratch,
+        l: usize,
+        cur: usize,
+    ) -> usize {
+        let ((cw, ch), d) = (s.dims[l + 1], s.dims[l]);
+        let p = FlowParams {
+            width: d.0,
+            height: d.1,
+            src_width: cw,
+            src_height: ch,
+            ..Default::default()
+        };
+        let bufs = [
+            s.u[cur].all(),
+            s.p[cur].all(),
+            s.u[1 - cur].all(),
+            s.p[1 - cur].all(),
+        ];
+        rec.dispatch_threads(&self.upsample, &p, &bufs, [d.0, d.1, 1]);
+        1 - cur
+    }
+
     /// The full-resolution prefilters of the grey planes (stage 1b): `blur_a` passes on I0,
     /// then the texture split of both planes.
     fn record_prefilter(&self, rec: &mut Recorder<'_>, s: &FlowScratch) {

@@ -51,46 +51,37 @@ fn grey(img: &[[f32; 4]], w: usize, h: usize) -> Plane {
     Plane { w, h, v }
 }
 
+/// 5×5 binomial blur ([1 4 6 4 1]/16 separable, clamped border) of `src` centred on
+/// `(cx, cy)`.
+fn binomial_at(src: &Plane, cx: i64, cy: i64) -> f64 {
+    const K: [f64; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+    let mut acc = 0.0;
+    for (j, kj) in K.iter().enumerate() {
+        let mut row = 0.0;
+        for (i, ki) in K.iter().enumerate() {
+            row += ki * src.clamped(cx + i as i64 - 2, cy + j as i64 - 2);
+        }
+        acc += kj * row;
+    }
+    acc
+}
+
+/// `w`×`h` samples of `f(x, y)`.
+fn plane(w: usize, h: usize, f: impl Fn(i64, i64) -> f64) -> Plane {
+    let v = (0..w * h)
+        .map(|o| f((o % w) as i64, (o / w) as i64))
+        .collect();
+    Plane { w, h, v }
+}
+
 /// 5×5 binomial blur sampled at even pixels (glsl/flow/downsample.comp).
 fn downsample(src: &Plane, w: usize, h: usize) -> Plane {
-    const K: [f64; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
-    let mut v = vec![0.0; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let mut acc = 0.0;
-            for (j, kj) in K.iter().enumerate() {
-                let mut row = 0.0;
-                for (i, ki) in K.iter().enumerate() {
-                    row +=
-                        ki * src.clamped(2 * x as i64 + i as i64 - 2, 2 * y as i64 + j as i64 - 2);
-                }
-                acc += kj * row;
-            }
-            v[y * w + x] = acc;
-        }
-    }
-    Plane { w, h, v }
+    plane(w, h, |x, y| binomial_at(src, 2 * x, 2 * y))
 }
 
 /// One 5×5 binomial blur pass, clamped border, same size (glsl/flow/prefilter.comp).
 fn blur(src: &Plane) -> Plane {
-    const K: [f64; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
-    let (w, h) = (src.w, src.h);
-    let mut v = vec![0.0; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let mut acc = 0.0;
-            for (j, kj) in K.iter().enumerate() {
-                let mut row = 0.0;
-                for (i, ki) in K.iter().enumerate() {
-                    row += ki * src.clamped(x as i64 + i as i64 - 2, y as i64 + j as i64 - 2);
-                }
-                acc += kj * row;
-            }
-            v[y * w + x] = acc;
-        }
-    }
-    Plane { w, h, v }
+    plane(src.w, src.h, |x, y| binomial_at(src, x, y))
 }
 
 /// `n` blur passes.

@@ -74,7 +74,7 @@ pub struct TrainArgs {
     #[arg(long)]
     pub pair_gap: Option<u32>,
     /// Optical-flow preset: fast, default or accurate (pyramid levels, warps, iterations)
-    /// [default: default].
+    /// [preset: paper default, fast fast].
     #[arg(long)]
     pub flow_preset: Option<String>,
     /// Motion decomposition: direct = intermediate render (v1, t2), the paper's; reverse =
@@ -134,7 +134,7 @@ pub struct TrainArgs {
     #[arg(long)]
     pub flow_texture: Option<f32>,
     /// Finest pyramid level the optical flow is solved at (0 = full resolution; 1 = half,
-    /// about 4× cheaper), upsampled afterwards [default: 0].
+    /// about 4× cheaper), upsampled afterwards [preset: paper 0, fast 1].
     #[arg(long)]
     pub flow_level: Option<u32>,
     /// Keep every checkpoint as OUT/checkpoints/NNNNNN.ckpt (for `dispflow-vk signal`).

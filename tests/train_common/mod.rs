@@ -40,3 +40,27 @@ pub fn tiny_config(iterations: u32) -> TrainConfig {
     c.densify.budget = 8000;
     c
 }
+
+/// A run of 60 iterations on the tiny scene for the CLI tests: deformation from 20, motion
+/// term from 40, densification, a checkpoint every `checkpoint_interval` iterations.
+pub fn tiny_toml(checkpoint_interval: u32) -> String {
+    format!(
+        r#"
+iterations = 60
+mlp_width = 16
+mlp_depth = 2
+warm_up = 20
+motion_start = 40
+flow_preset = "fast"
+sh_degree = 1
+sh_interval = 30
+log_interval = 10
+checkpoint_interval = {checkpoint_interval}
+[densify]
+from = 20
+until = 50
+interval = 25
+budget = 8000
+"#
+    )
+}
