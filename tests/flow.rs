@@ -724,7 +724,8 @@ fn speed_accuracy_table() {
         "preset         levels warps iters | GPU ms (per pair) | EPE translation rotation non-rigid"
     );
     let mut rows = Vec::new();
-    let knobs: [(&str, fn(&mut FlowConfig)); 6] = [
+    type Knob = fn(&mut FlowConfig);
+    let knobs: [(&str, Knob); 6] = [
         ("fast", |_| ()),
         ("default", |_| ()),
         ("accurate", |_| ()),

@@ -64,6 +64,9 @@ fn signal_scores_every_kept_checkpoint() {
     assert_eq!(json.as_array().unwrap().len(), 2);
 }
 
+/// A change to the flags.
+type Edit<'a> = &'a dyn Fn(&mut TrainArgs);
+
 #[test]
 fn scene_motion_knobs_are_checked_by_name() {
     let with = |f: &dyn Fn(&mut TrainArgs)| {
@@ -75,7 +78,7 @@ fn scene_motion_knobs_are_checked_by_name() {
         resolve_config(&a).map(|_| ()).map_err(|e| e.to_string())
     };
     assert!(with(&|a| a.motion_residual = Some(true)).is_ok());
-    let cases: [(&dyn Fn(&mut TrainArgs), &str); 5] = [
+    let cases: [(Edit, &str); 5] = [
         (&|a| a.motion_every = Some(0), "scene_motion.every"),
         (
             &|a| a.motion_confidence = Some(-1.0),

@@ -8,15 +8,15 @@
 //! Stages, in recording order:
 //! 1. `grey`: RGB → `GREY_SCALE · (0.299 r + 0.587 g + 0.114 b)` (intensities in [0, 255], so
 //!    λ has its usual literature scale), for `a` (I0) and `b` (I1).
-//! 1b. `prefilter` (optional, full resolution): `blur_a` binomial blur passes of I0 only (a
+//! 2. `prefilter` (optional, full resolution): `blur_a` binomial blur passes of I0 only (a
 //!    sharp photo against a blurry render: σ = √blur_a px), then, with `texture` = β > 0, both
 //!    planes become `I − β·S(I)`, `S` = [`TEXTURE_PASSES`] blur passes: the texture part of a
 //!    structure–texture split (classically S is a ROF/TV denoising; a Gaussian structure is
 //!    the cheap stand-in), which drops the shading a render has not learnt yet.
-//! 2. `downsample` per level: 5×5 binomial blur ([1 4 6 4 1]/16 separable, clamped border)
+//! 3. `downsample` per level: 5×5 binomial blur ([1 4 6 4 1]/16 separable, clamped border)
 //!    sampled at even pixels; a level is `ceil(w/2) × ceil(h/2)` of the finer one; the pyramid
 //!    stops after `levels` levels or when a level's smaller side would drop below `min_size`.
-//! 3. Coarse to fine, per level: flow (u) and dual variables (p) start at 0 on the coarsest
+//! 4. Coarse to fine, per level: flow (u) and dual variables (p) start at 0 on the coarsest
 //!    level, otherwise `upsample` (bilinear, fine pixel `x` at coarse `x/2`, u × 2);
 //!    `gradient` of I1 (central differences, clamped); then `warps` times: `warp` (bilinear,
 //!    border-clamped: I1, ∂I1/∂x, ∂I1/∂y at `x + u`, the linearised residual), and `iterations`
@@ -26,7 +26,7 @@
 //!    the new u of its +x and +y neighbours to get ∇u, so an iteration is a single pass.
 //!    With `finest` = L > 0 the solve stops after level L and the flow is brought to full
 //!    resolution by `upsample` alone (about 4^L times less work on the finest levels).
-//! 4. The level-0 flow is copied to the caller's buffer.
+//! 5. The level-0 flow is copied to the caller's buffer.
 //!
 //! No median filtering and no stopping criterion (fixed work, no readback). Flat or textureless
 //! regions have |∇I1|² = 0: the data step does nothing there (no division; `FLOW_GRAD_EPS`) and
@@ -514,7 +514,7 @@ impl TvL1Flow {
         1 - cur
     }
 
-    /// The full-resolution prefilters of the grey planes (stage 1b): `blur_a` passes on I0,
+    /// The full-resolution prefilters of the grey planes (stage 2): `blur_a` passes on I0,
     /// then the texture split of both planes.
     fn record_prefilter(&self, rec: &mut Recorder<'_>, s: &FlowScratch) {
         let (w, h) = (s.width, s.height);
