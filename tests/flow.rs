@@ -6,6 +6,7 @@
 //! `a(x) = T(x)` and `b(y) = T(m(y))` for an analytic texture `T` and a map `m`; then
 //! `a(x) = b(m⁻¹(x))`, so the flow from a to b is `m⁻¹(x) − x`. EPE is the mean over pixels at
 //! least `MARGIN` px inside the border (pixels whose match leaves the image have no answer).
+//! (Over ~600 lines: one test file per kernel family; the image-pair builders are shared.)
 
 use dispflow_vk::data::synthetic::{render_view, GenCamera, Scene};
 use dispflow_vk::kernels::flow::{FlowConfig, FlowEstimator, TvL1Flow};

@@ -1,4 +1,5 @@
 //! `dispflow-vk train`: flags, the run loop with progress and outputs.
+//! (Over ~600 lines: most of it is the flag list clap documents, one doc comment a flag.)
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
