@@ -133,6 +133,7 @@ fn gpu_signal(
     render_t1: &[[f32; 4]],
     residual: bool,
     sigma: f32,
+    mask_px: f32,
 ) -> (Vec<[f32; 2]>, Vec<f32>) {
     let gpu = testing::gpu();
     let k = DispFlow::new(&gpu).unwrap();
@@ -154,7 +155,7 @@ fn gpu_signal(
         scene: scene.all(),
         conf: conf.all(),
     };
-    k.scene_signal(&mut rec, px as u32, residual, sigma, &io);
+    k.scene_signal(&mut rec, px as u32, residual, sigma, mask_px, &io);
     rec.finish().unwrap();
     (
         gpu.read(scene.all()).unwrap(),
@@ -184,9 +185,25 @@ fn scene_signal_matches_twin_with_extremes() {
     f2[4] = [0.0, f32::INFINITY];
     r1[5] = [f32::INFINITY, 0.0, 0.0, 1.0];
     r1[6] = photo[6];
-    for (residual, sigma) in [(false, 0.0), (true, 0.0), (true, 0.1), (false, 1e-3)] {
-        let (s, c) = gpu_signal((&f2, &f1), &photo, &r1, residual, sigma);
-        let (ws, wc) = twin::scene_signal(&f2, &f1, &photo, &r1, residual, sigma as f64);
+    // The last case filters with a motion mask (|s| < 10 px → 0; the flows reach 20 px).
+    let cases = [
+        (false, 0.0, 0.0),
+        (true, 0.0, 0.0),
+        (true, 0.1, 0.0),
+        (false, 1e-3, 0.0),
+        (true, 0.0, 10.0),
+    ];
+    for (residual, sigma, mask) in cases {
+        let (s, c) = gpu_signal((&f2, &f1), &photo, &r1, residual, sigma, mask);
+        let (ws, wc) =
+            twin::scene_signal(&f2, &f1, &photo, &r1, residual, sigma as f64, mask as f64);
+        if mask > 0.0 {
+            let zeroed = ws.iter().filter(|v| v[0] == 0.0 && v[1] == 0.0).count();
+            assert!(
+                zeroed > px / 10 && zeroed < px * 9 / 10,
+                "the mask case must zero some vectors and keep others: {zeroed} of {px}"
+            );
+        }
         for p in 0..px {
             for k in 0..2 {
                 let (g, w) = (s[p][k] as f64, ws[p][k]);
@@ -308,7 +325,7 @@ fn residual_correction_removes_blur_motion_and_keeps_real_motion() {
     let r2 = blur(&photo, w, h, 4);
     let raw = tvl1(&photo, &r2, w as u32, h as u32);
     let res = tvl1(&photo, &r1, w as u32, h as u32);
-    let (s, _) = gpu_signal((&raw, &res), &photo, &r1, true, 0.0);
+    let (s, _) = gpu_signal((&raw, &res), &photo, &r1, true, 0.0, 0.0);
     let mag = |v: [f32; 2]| ((v[0] as f64).powi(2) + (v[1] as f64).powi(2)).sqrt();
     let (m_raw, m_res) = (interior_mean(&raw, w, h, mag), interior_mean(&s, w, h, mag));
     eprintln!("static blurred scene: mean |raw| {m_raw:.4} px, |corrected| {m_res:.4} px");
@@ -320,7 +337,7 @@ fn residual_correction_removes_blur_motion_and_keeps_real_motion() {
     // A moving scene: the render at t2 shows the content 2 px to the right.
     let r2m = blur(&photo_image(w, h, 2.0), w, h, 4);
     let raw_m = tvl1(&photo, &r2m, w as u32, h as u32);
-    let (sm, _) = gpu_signal((&raw_m, &res), &photo, &r1, true, 0.0);
+    let (sm, _) = gpu_signal((&raw_m, &res), &photo, &r1, true, 0.0, 0.0);
     let mean_x = interior_mean(&sm, w, h, |v| v[0] as f64);
     let mean_y = interior_mean(&sm, w, h, |v| v[1] as f64);
     eprintln!("moving scene: corrected mean flow ({mean_x:.3}, {mean_y:.3}) px, truth (2, 0)");
@@ -342,7 +359,7 @@ fn confidence_is_low_where_the_render_misses_an_occluder() {
     }
     let r1 = blur(&bare, w, h, 2);
     let zero = vec![[0f32; 2]; w * h];
-    let (_, c) = gpu_signal((&zero, &zero), &photo, &r1, false, 0.05);
+    let (_, c) = gpu_signal((&zero, &zero), &photo, &r1, false, 0.05, 0.0);
     let (mut inside, mut outside) = ((0.0, 0), (0.0, 0));
     for y in 0..h {
         for x in 0..w {

@@ -240,7 +240,7 @@ fn small_images_and_one_pixel() {
 
 #[test]
 fn medium_images_all_feature_counts() {
-    for (seed, k) in [(4, 0), (5, 2), (6, 3)] {
+    for (seed, k) in [(4, 0), (5, 2), (6, 3), (8, 6)] {
         compare(seed, 200, 64, 48, 3, k);
     }
 }

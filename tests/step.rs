@@ -546,7 +546,8 @@ mod gpu_step {
     use dispflow_vk::testing;
     use dispflow_vk::train::config::{DensifyConfig, MotionOrder};
     use dispflow_vk::train::frames::GpuFrame;
-    use dispflow_vk::train::passes::motion::FixedMotion;
+    use dispflow_vk::train::method::{MotionRepresentation, SceneMotionKind};
+    use dispflow_vk::train::passes::motion::{FixedMotion, MotionVariant};
     use dispflow_vk::train::passes::{
         AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass,
         StepSizes,
@@ -621,7 +622,11 @@ mod gpu_step {
                     gpu,
                     raster,
                     &sizes,
-                    roles,
+                    MotionVariant {
+                        roles,
+                        representation: MotionRepresentation::Displacement,
+                        scene: SceneMotionKind::Direct,
+                    },
                     norm,
                     SceneSignal::new(
                         gpu,

@@ -7,6 +7,7 @@
 //   same pixel is the first-order form of composing the two fields.
 //   confidence: c = exp(−e / σ), e = mean over RGB of |photo − render(v1, t1)|: where the
 //   render does not yet reproduce the photo, its flow says little. σ = 0: c = 1.
+//   motion-mask filtering (MotionGS-style ablation): |s| < mask_px pixels is set to 0.
 // Non-finite inputs give c = 0 and s = 0 (never a NaN into the loss).
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
@@ -27,6 +28,7 @@ void main() {
     if (p >= pc.n) return;
     vec2 s = flow_t2[p];
     if (pc.residual != 0u) s -= flow_t1[p];
+    if (length(s) < pc.mask_px) s = vec2(0.0);
     float c = 1.0;
     if (pc.sigma > 0.0) {
         vec3 d = abs(photo[p].rgb - render_t1[p].rgb);

@@ -285,7 +285,33 @@ struct SceneSignalParams {
     uint n;           // pixels
     uint residual;    // 1: subtract flow(photo → render(v1, t1))
     float sigma;      // confidence scale on the mean |photo − render(v1, t1)|; 0 = off (c = 1)
+    float mask_px;    // motion-mask filtering: |s| below this (pixels) becomes 0; 0 = off
+};
+
+// src/kernels/dispflow.rs — camera_flow (indirect scene motion: pair flow − camera flow).
+// The relative pose v1 → v2 is composed on the host (in f64): y = M·x_cam1 + m.
+struct CameraFlowParams {
+    vec4 rel0;        // rows of M = R2·R1ᵀ, w: m = t2 − M·t1
+    vec4 rel1;
+    vec4 rel2;
+    vec4 intr_a;      // fx, fy, cx, cy of v1
+    vec4 intr_b;      // of v2
+    uint width;
+    uint height;
+    float min_alpha;  // below this render alpha the depth is not trusted
+    uint subtract;    // 0: the raw pair flow (no decomposition)
+    float near_b;     // v2's near plane
     uint pad0;
+    uint pad1;
+    uint pad2;
+};
+
+// src/kernels/gflow.rs — Gaussian flow (features, their backward, the vector L1)
+struct GFlowParams {
+    uint n;           // Gaussians (feature stages) or pixels (L1)
+    uint width;       // image width (L1: the pixel coordinates)
+    float weight;     // α_t (L1)
+    uint conf;        // L1: 1 = weight each pixel by the confidence binding
 };
 
 // src/kernels/flow.rs — TV-L1 optical flow stages (one struct for all; each stage says which

@@ -5,7 +5,7 @@ use serde::Serialize;
 
 use super::FrameEval;
 use crate::report::{self, Table};
-use crate::train::config::{DeformMode, MotionFlow, MotionOrder, NormGrad, TrainConfig};
+use crate::train::config::{DeformMode, NormGrad, TrainConfig};
 
 /// Scores of a run on its test split.
 #[derive(Debug, Serialize)]
@@ -150,25 +150,19 @@ pub fn mean(v: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
-/// "DispFlow-GS (α=0.1)" or "Deformable-3DGS" from the run's configuration.
+/// The paper's row name for the run (e.g. "Gaussian Flow + Indirect Scene Motion (MotionGS)",
+/// `train::method::row_name`), with α when it is not the paper's 0.1 and the normalisation
+/// gradient when it is not the default.
 pub fn method_name(cfg: &TrainConfig) -> String {
-    if cfg.deform == DeformMode::Off {
-        return "3DGS".into();
+    let mut name = crate::train::method::row_name(cfg);
+    let moving = cfg.deform != DeformMode::Off && cfg.motion_weight > 0.0;
+    if moving && cfg.motion_weight != 0.1 {
+        name += &format!(", α={}", cfg.motion_weight);
     }
-    if cfg.motion_weight <= 0.0 {
-        return "Deformable-3DGS".into();
+    if moving && cfg.motion_norm_grad == NormGrad::Full {
+        name += ", full norm grad";
     }
-    let mut extra = String::new();
-    if cfg.motion_order == MotionOrder::Reverse {
-        extra += ", reverse order";
-    }
-    if cfg.motion_norm_grad == NormGrad::Full {
-        extra += ", full norm grad";
-    }
-    if cfg.motion_flow == MotionFlow::Oracle {
-        extra += ", oracle flow";
-    }
-    format!("DispFlow-GS (α={}{extra})", cfg.motion_weight)
+    name
 }
 
 const TABLE_HEADERS: [&str; 7] = [

@@ -345,6 +345,8 @@ fn score(
             b: fb,
             from: fa.target.all(),
             to: p.r2.rgba(),
+            render_t1: p.r1.rgba(),
+            depth_t1: p.r1.depth(),
         };
         for (k, (v, (sig, plain))) in vars.iter().zip(&signals).enumerate() {
             let record = |rec: &mut Recorder<'_>| {

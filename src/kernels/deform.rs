@@ -47,6 +47,7 @@ pub struct DeformApply {
     fwd_static: ComputePipeline,
     bwd: ComputePipeline,
     bwd_static: ComputePipeline,
+    bwd_add: ComputePipeline,
 }
 
 impl DeformApply {
@@ -57,6 +58,7 @@ impl DeformApply {
             fwd_static: gpu.pipeline(&d::DEFORM_STATIC)?,
             bwd: gpu.pipeline(&d::DEFORM_APPLY_BWD)?,
             bwd_static: gpu.pipeline(&d::DEFORM_STATIC_BWD)?,
+            bwd_add: gpu.pipeline(&d::DEFORM_APPLY_BWD_ACC)?,
         })
     }
 
@@ -124,5 +126,34 @@ impl DeformApply {
             None => &self.bwd_static,
         };
         rec.dispatch_rows(pipe, &pc, &binds, n);
+    }
+
+    /// [`DeformApply::backward`] with the MLP output, added to `grads` and `d_deform`
+    /// instead of written (a second render of the same step).
+    pub fn backward_add(
+        &self,
+        rec: &mut Recorder<'_>,
+        n: u32,
+        c: &Canonical<'_>,
+        d_drawn: &Drawn<'_>,
+        grads: &Canonical<'_>,
+        d_deform: BufSlice<'_>,
+    ) {
+        let pc = DeformParams {
+            n,
+            ..Default::default()
+        };
+        let binds = [
+            c.log_scales,
+            c.quats,
+            d_drawn.means,
+            d_drawn.scales,
+            d_drawn.quats,
+            grads.means,
+            grads.log_scales,
+            grads.quats,
+            d_deform,
+        ];
+        rec.dispatch_rows(&self.bwd_add, &pc, &binds, n);
     }
 }

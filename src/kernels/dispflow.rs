@@ -1,12 +1,14 @@
 //! The trainer-side stages of the DispFlow-GS motion term (`glsl/dispflow/*.comp`); CPU twin:
 //! `reference::dispflow`. The displacement δ = dx(t2) − dx(t1) that the rasteriser splats as
 //! three feature channels, its backward into both MLP passes, the scene motion's residual
-//! correction and confidence (`scene_signal`), and the L1 motion loss between the normalised
-//! magnitude maps.
+//! correction, confidence and motion-mask filter (`scene_signal`), the indirect scene motion
+//! of MotionGS (`camera_flow`), the L1 motion loss between the normalised magnitude maps, and
+//! `grad_add` (a second render's opacity gradients).
 
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::Result;
+use crate::kernels::raster::Camera;
 use crate::shaders;
 use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
 
@@ -30,7 +32,61 @@ pub struct SceneSignalParams {
     pub residual: u32,
     /// Confidence scale σ on the mean |photo − render(v1, t1)| (RGB in [0, 1]); 0 = c ≡ 1.
     pub sigma: f32,
+    /// Motion-mask filtering: |s| below this many pixels becomes 0; 0 = off.
+    pub mask_px: f32,
+}
+
+/// Mirrors `CameraFlowParams` in glsl/include/params.glsl (checked by tests/layout.rs).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct CameraFlowParams {
+    /// Rows of M = R2·R1ᵀ; w: m = t2 − M·t1 (a point in v1's camera frame → v2's).
+    pub rel0: [f32; 4],
+    pub rel1: [f32; 4],
+    pub rel2: [f32; 4],
+    pub intr_a: [f32; 4],
+    pub intr_b: [f32; 4],
+    pub width: u32,
+    pub height: u32,
+    pub min_alpha: f32,
+    /// 0: the raw pair flow passes through (no decomposition).
+    pub subtract: u32,
+    pub near_b: f32,
     pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
+}
+
+impl CameraFlowParams {
+    /// v1 = `a`, v2 = `b` (same image size); `subtract`: remove the camera flow. The relative
+    /// pose is composed in f64.
+    pub fn new(a: &Camera, b: &Camera, min_alpha: f32, subtract: bool) -> Self {
+        let (ra, rb) = (
+            a.rot.map(|r| r.map(f64::from)),
+            b.rot.map(|r| r.map(f64::from)),
+        );
+        // M[i][j] = Σ_k R2[i][k]·R1[j][k]
+        let m: [[f64; 3]; 3] = std::array::from_fn(|i| {
+            std::array::from_fn(|j| (0..3).map(|k| rb[i][k] * ra[j][k]).sum())
+        });
+        let t =
+            |i: usize| b.trans[i] as f64 - (0..3).map(|j| m[i][j] * a.trans[j] as f64).sum::<f64>();
+        let row = |i: usize| [m[i][0] as f32, m[i][1] as f32, m[i][2] as f32, t(i) as f32];
+        let k = |c: &Camera| [c.fx, c.fy, c.cx, c.cy];
+        CameraFlowParams {
+            rel0: row(0),
+            rel1: row(1),
+            rel2: row(2),
+            intr_a: k(a),
+            intr_b: k(b),
+            width: a.width,
+            height: a.height,
+            min_alpha,
+            subtract: subtract as u32,
+            near_b: b.near,
+            ..Default::default()
+        }
+    }
 }
 
 /// The buffers of one `scene_signal` dispatch ([H·W] each): the two flows out of the photo,
@@ -45,6 +101,8 @@ pub struct SignalIo<'a> {
 }
 
 pub struct DispFlow {
+    camera_flow: ComputePipeline,
+    grad_add: ComputePipeline,
     displacement: ComputePipeline,
     displacement_bwd: ComputePipeline,
     motion_l1: ComputePipeline,
@@ -54,6 +112,8 @@ pub struct DispFlow {
 impl DispFlow {
     pub fn new(gpu: &Gpu) -> Result<Self> {
         Ok(DispFlow {
+            camera_flow: gpu.pipeline(&shaders::dispflow::CAMERA_FLOW)?,
+            grad_add: gpu.pipeline(&shaders::dispflow::GRAD_ADD)?,
             displacement: gpu.pipeline(&shaders::dispflow::DISPLACEMENT)?,
             displacement_bwd: gpu.pipeline(&shaders::dispflow::DISPLACEMENT_BWD)?,
             motion_l1: gpu.pipeline(&shaders::dispflow::MOTION_L1)?,
@@ -131,21 +191,22 @@ impl DispFlow {
         );
     }
 
-    /// The scene motion `flow_t2 − residual·flow_t1` and its confidence
-    /// `exp(−mean|photo − render_t1| / sigma)` (1 when `sigma` = 0) over `pixels`.
+    /// The scene motion `flow_t2 − residual·flow_t1` (0 where shorter than `mask_px`) and its
+    /// confidence `exp(−mean|photo − render_t1| / sigma)` (1 when `sigma` = 0) over `pixels`.
     pub fn scene_signal(
         &self,
         rec: &mut Recorder<'_>,
         pixels: u32,
         residual: bool,
         sigma: f32,
+        mask_px: f32,
         io: &SignalIo<'_>,
     ) {
         let pc = SceneSignalParams {
             n: pixels,
             residual: residual as u32,
             sigma,
-            pad0: 0,
+            mask_px,
         };
         rec.dispatch_threads(
             &self.scene_signal,
@@ -160,5 +221,33 @@ impl DispFlow {
             ],
             [pixels, 1, 1],
         );
+    }
+
+    /// Indirect scene motion: `flow` (photo a → photo b) minus the camera flow of the render
+    /// (v1, t1)'s depth reprojected from v1 into v2 (`p.subtract`), into `scene` ([H·W] vec2).
+    pub fn camera_flow(
+        &self,
+        rec: &mut Recorder<'_>,
+        p: &CameraFlowParams,
+        flow: BufSlice<'_>,
+        rgba: BufSlice<'_>,
+        depth: BufSlice<'_>,
+        scene: BufSlice<'_>,
+    ) {
+        rec.dispatch_threads(
+            &self.camera_flow,
+            p,
+            &[flow, rgba, depth, scene],
+            [p.width * p.height, 1, 1],
+        );
+    }
+
+    /// `dst += src` over `n` floats.
+    pub fn grad_add(&self, rec: &mut Recorder<'_>, n: u32, src: BufSlice<'_>, dst: BufSlice<'_>) {
+        let pc = DispFlowParams {
+            n,
+            ..Default::default()
+        };
+        rec.dispatch_rows(&self.grad_add, &pc, &[src, dst], n);
     }
 }

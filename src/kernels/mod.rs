@@ -6,6 +6,7 @@ pub mod deform;
 pub mod densify;
 pub mod dispflow;
 pub mod flow;
+pub mod gflow;
 pub mod loss;
 pub mod lpips;
 pub mod metrics;
@@ -31,7 +32,24 @@ pub fn param_layouts() -> Vec<ParamLayout> {
     }
     vec![
         layout!(dispflow::DispFlowParams, n, weight, conf, pad1),
-        layout!(dispflow::SceneSignalParams, n, residual, sigma, pad0),
+        layout!(dispflow::SceneSignalParams, n, residual, sigma, mask_px),
+        layout!(gflow::GFlowParams, n, width, weight, conf),
+        layout!(
+            dispflow::CameraFlowParams,
+            rel0,
+            rel1,
+            rel2,
+            intr_a,
+            intr_b,
+            width,
+            height,
+            min_alpha,
+            subtract,
+            near_b,
+            pad0,
+            pad1,
+            pad2
+        ),
         layout!(deform::DeformParams, n, pad0, pad1, pad2),
         layout!(
             sparse::ProbeParams,

@@ -30,9 +30,9 @@ pub const SPLAT_STRIDE: u64 = 3;
 /// Floats per 2D gradient record (mirrors `G2D_STRIDE`): mean2d 2, conic 3, opacity 1,
 /// colour 3, depth 1, unused 2.
 pub const G2D_STRIDE: u64 = 12;
-/// Feature-channel counts with a compiled blend variant (0: none, 2: Gaussian flow,
-/// 3: displacement flow).
-pub const FEATURE_DIMS: [u32; 3] = [0, 2, 3];
+/// Feature-channel counts with a compiled blend variant (0: none, 2: a 2D field, 3:
+/// displacement flow, 6: Gaussian flow's affine channels, see `kernels::gflow`).
+pub const FEATURE_DIMS: [u32; 4] = [0, 2, 3, 6];
 
 /// Pinhole camera with principal point; world-to-camera `p_cam = rot · p + trans`, OpenCV axes
 /// (x right, y down, z forward). Pixel centres at (x + 0.5, y + 0.5).
@@ -361,10 +361,10 @@ pub struct Rasterizer {
     bin_emit: ComputePipeline,
     bin_ranges: ComputePipeline,
     /// Per variant (its discriminant), per feature count.
-    blend_fwd: [[ComputePipeline; 3]; 2],
+    blend_fwd: [[ComputePipeline; 4]; 2],
     blend_fwd_variant: BlendFwdVariant,
     /// Per variant (its discriminant), per feature count.
-    blend_bwd: [[ComputePipeline; 3]; 2],
+    blend_bwd: [[ComputePipeline; 4]; 2],
     blend_bwd_variant: BlendBwdVariant,
     project_bwd: ComputePipeline,
     scan: PrefixSum,
@@ -405,11 +405,13 @@ impl Rasterizer {
                     gpu.pipeline(&r::BLEND_FWD_F0)?,
                     gpu.pipeline(&r::BLEND_FWD_F2)?,
                     gpu.pipeline(&r::BLEND_FWD_F3)?,
+                    gpu.pipeline(&r::BLEND_FWD_F6)?,
                 ],
                 [
                     gpu.pipeline(&r::BLEND_FWD_TILE_F0)?,
                     gpu.pipeline(&r::BLEND_FWD_TILE_F2)?,
                     gpu.pipeline(&r::BLEND_FWD_TILE_F3)?,
+                    gpu.pipeline(&r::BLEND_FWD_TILE_F6)?,
                 ],
             ],
             blend_fwd_variant: BlendFwdVariant::for_device(&gpu.info),
@@ -418,11 +420,13 @@ impl Rasterizer {
                     gpu.pipeline(&r::BLEND_BWD_F0)?,
                     gpu.pipeline(&r::BLEND_BWD_F2)?,
                     gpu.pipeline(&r::BLEND_BWD_F3)?,
+                    gpu.pipeline(&r::BLEND_BWD_F6)?,
                 ],
                 [
                     gpu.pipeline(&r::BLEND_BWD_TILE_F0)?,
                     gpu.pipeline(&r::BLEND_BWD_TILE_F2)?,
                     gpu.pipeline(&r::BLEND_BWD_TILE_F3)?,
+                    gpu.pipeline(&r::BLEND_BWD_TILE_F6)?,
                 ],
             ],
             blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
@@ -587,9 +591,22 @@ impl Rasterizer {
         g: &SplatInputs<'_>,
         o: &RenderOpts,
     ) {
+        self.forward_project(rec, b, cam, g);
+        self.forward_blend(rec, b, cam, g, o);
+    }
+
+    /// The projection of `forward` alone: the splat records `b.splats` (a Gaussian-flow step
+    /// needs the projection at t2 without its image, and the features of the render at t1
+    /// between its projection and its blend).
+    pub fn forward_project(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+    ) {
         Self::check(b, cam, g);
         let pp = Self::project_params(b, cam, g);
-        let bits = sort_bits(cam);
         rec.dispatch_rows(
             &self.project,
             &pp,
@@ -606,6 +623,20 @@ impl Rasterizer {
             ],
             g.n,
         );
+    }
+
+    /// The rest of `forward` after `forward_project`: binning, sorting and the blend.
+    pub fn forward_blend(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+        o: &RenderOpts,
+    ) {
+        Self::check(b, cam, g);
+        let pp = Self::project_params(b, cam, g);
+        let bits = sort_bits(cam);
         self.scan.record(
             rec,
             &b.scan,
@@ -675,6 +706,20 @@ impl Rasterizer {
         o: &RenderOpts,
         d: &OutputGrads<'_>,
     ) {
+        self.backward_blend(rec, b, cam, g, o, d);
+        self.backward_project(rec, b, cam, g);
+    }
+
+    /// The blend backward of `backward` alone: `b.grad2d` and `b.d_features`.
+    pub fn backward_blend(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+        o: &RenderOpts,
+        d: &OutputGrads<'_>,
+    ) {
         Self::check(b, cam, g);
         assert_eq!(
             d.features.is_some(),
@@ -705,6 +750,18 @@ impl Rasterizer {
             &binds,
             [tx.max(1), ty.max(1), 1],
         );
+    }
+
+    /// The projection backward of `backward` alone: `b.grad2d` (as the blend left it, plus
+    /// whatever the caller added) to the 3D gradients `b.d_*`.
+    pub fn backward_project(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+    ) {
+        Self::check(b, cam, g);
         let pp = Self::project_params(b, cam, g);
         rec.dispatch_rows(
             &self.project_bwd,

@@ -3,6 +3,8 @@
 
 use std::ops::Sub;
 
+use crate::kernels::raster::Camera;
+
 /// δ_i = dx_i(t2) − dx_i(t1) from [N,10] MLP outputs.
 pub fn displacement<T: Copy + Sub<Output = T>>(out_t1: &[T], out_t2: &[T]) -> Vec<T> {
     out_t1
@@ -65,8 +67,9 @@ pub fn motion_l1<T: Copy + Into<f64>>(
     (sum / n, g)
 }
 
-/// Twin of `scene_signal`: (scene motion `flow_t2 − residual·flow_t1`, confidence
-/// `exp(−mean_rgb|photo − render_t1| / sigma)`, 1 when `sigma` = 0); non-finite → (0, 0).
+/// Twin of `scene_signal`: (scene motion `flow_t2 − residual·flow_t1`, 0 where shorter than
+/// `mask_px`; confidence `exp(−mean_rgb|photo − render_t1| / sigma)`, 1 when `sigma` = 0);
+/// non-finite → (0, 0).
 pub fn scene_signal(
     flow_t2: &[[f32; 2]],
     flow_t1: &[[f32; 2]],
@@ -74,12 +77,16 @@ pub fn scene_signal(
     render_t1: &[[f32; 4]],
     residual: bool,
     sigma: f64,
+    mask_px: f64,
 ) -> (Vec<[f64; 2]>, Vec<f64>) {
     let mut scene = Vec::with_capacity(flow_t2.len());
     let mut conf = Vec::with_capacity(flow_t2.len());
     for p in 0..flow_t2.len() {
         let r = if residual { flow_t1[p] } else { [0.0; 2] };
-        let s = [0, 1].map(|k| flow_t2[p][k] as f64 - r[k] as f64);
+        let mut s = [0, 1].map(|k| flow_t2[p][k] as f64 - r[k] as f64);
+        if s[0].hypot(s[1]) < mask_px {
+            s = [0.0; 2];
+        }
         let c = if sigma > 0.0 {
             let e: f64 = (0..3)
                 .map(|k| (photo[p][k] as f64 - render_t1[p][k] as f64).abs())
@@ -94,4 +101,55 @@ pub fn scene_signal(
         conf.push(if ok { c } else { 0.0 });
     }
     (scene, conf)
+}
+
+/// Twin of `camera_flow`: the pair flow minus the camera flow of the depth `depth / alpha`
+/// reprojected from `a` into `b` at pixel centres; 0 where alpha < `min_alpha`, the depth is
+/// not positive and finite, the point is behind `b`'s near plane or anything is not finite.
+/// `subtract` = false passes the flow through (non-finite → 0).
+pub fn camera_flow(
+    a: &Camera,
+    b: &Camera,
+    flow: &[[f32; 2]],
+    rgba: &[[f32; 4]],
+    depth: &[f32],
+    min_alpha: f64,
+    subtract: bool,
+) -> Vec<[f64; 2]> {
+    let w = a.width as usize;
+    let f64s = |v: [f32; 3]| v.map(|x| x as f64);
+    (0..flow.len())
+        .map(|p| {
+            let mut f = flow[p].map(|v| v as f64);
+            let mut ok = f.iter().all(|v| v.is_finite());
+            if subtract {
+                let px = [(p % w) as f64 + 0.5, (p / w) as f64 + 0.5];
+                let al = rgba[p][3] as f64;
+                let z = depth[p] as f64 / al;
+                let xc = [
+                    (px[0] - a.cx as f64) / a.fx as f64 * z,
+                    (px[1] - a.cy as f64) / a.fy as f64 * z,
+                    z,
+                ];
+                let d = [0, 1, 2].map(|k| xc[k] - a.trans[k] as f64);
+                let ra = a.rot.map(f64s);
+                let xw = [0, 1, 2].map(|j| (0..3).map(|k| ra[k][j] * d[k]).sum::<f64>());
+                let rb = b.rot.map(f64s);
+                let y = [0, 1, 2]
+                    .map(|k| (0..3).map(|j| rb[k][j] * xw[j]).sum::<f64>() + b.trans[k] as f64);
+                let q = [
+                    b.fx as f64 * y[0] / y[2] + b.cx as f64,
+                    b.fy as f64 * y[1] / y[2] + b.cy as f64,
+                ];
+                ok = ok && al >= min_alpha && z > 0.0 && z.is_finite() && y[2] > b.near as f64;
+                f = [f[0] - (q[0] - px[0]), f[1] - (q[1] - px[1])];
+                ok = ok && f.iter().all(|v| v.is_finite());
+            }
+            if ok {
+                f
+            } else {
+                [0.0; 2]
+            }
+        })
+        .collect()
 }

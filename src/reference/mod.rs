@@ -6,6 +6,7 @@ pub mod deform;
 pub mod densify;
 pub mod dispflow;
 pub mod flow;
+pub mod gflow;
 pub mod loss;
 pub mod lpips;
 pub mod metrics;

@@ -90,6 +90,31 @@ pub struct TrainArgs {
     /// scene's ground-truth flow; an ablation isolating the estimator) [default: tvl1].
     #[arg(long, value_enum)]
     pub motion_flow: Option<super::config::MotionFlow>,
+    /// A compared method as a preset of the switches below (applied before them): 3dgs
+    /// (static), deformable-3dgs (no motion term), motiongs (Gaussian flow + indirect scene
+    /// motion) or dispflow (displacement flow + direct scene motion, the method) [default:
+    /// dispflow].
+    #[arg(long, value_enum)]
+    pub method: Option<super::method::Method>,
+    /// What the motion term supervises: displacement (DispFlow-GS: α-blended 3D displacement,
+    /// normalised magnitudes) or gaussian-flow (GaussianFlow/MotionGS: α-blended 2D motion of
+    /// the projected Gaussians, L1 on the vectors) [default: displacement].
+    #[arg(long, value_enum)]
+    pub motion_representation: Option<super::method::MotionRepresentation>,
+    /// Scene motion: direct (flow photo → render at the same view, the method), indirect
+    /// (MotionGS: flow photo a → photo b minus the camera flow of the rendered depth) or none
+    /// (the raw pair flow, camera motion included: the paper's "DF without MD") [default:
+    /// direct].
+    #[arg(long, value_enum)]
+    pub scene_motion: Option<super::method::SceneMotionKind>,
+    /// Motion weight schedule (TS): ramp (on from --motion-start, 0.1·α → α) or off (the full
+    /// α from the end of the deformation warm-up) [default: ramp].
+    #[arg(long, value_enum)]
+    pub motion_schedule: Option<super::method::MotionSchedule>,
+    /// Motion-mask filtering: scene motion shorter than this many pixels is set to 0 (the
+    /// paper's ablation; it found no consistent gain) [default: 0 = off].
+    #[arg(long, value_name = "PX")]
+    pub motion_mask: Option<f32>,
     /// Deformation network: on (Deformable-3DGS) or off (static 3D-GS, the paper's "3DGS"
     /// rows; needs --motion-weight 0) [default: on].
     #[arg(long, value_enum)]
@@ -221,6 +246,9 @@ pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig>
     if let Some(v) = a.iterations {
         c = c.with_iterations(v);
     }
+    if let Some(m) = a.method {
+        m.apply(&mut c);
+    }
     c.max_resolution = a.max_resolution.unwrap_or(c.max_resolution);
     c.sh_degree = a.sh_degree.unwrap_or(c.sh_degree);
     c.mlp_width = a.mlp_width.unwrap_or(c.mlp_width);
@@ -236,6 +264,8 @@ pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig>
     c.motion_order = a.motion_order.unwrap_or(c.motion_order);
     c.motion_norm_grad = a.motion_norm_grad.unwrap_or(c.motion_norm_grad);
     c.motion_flow = a.motion_flow.unwrap_or(c.motion_flow);
+    c.motion_representation = a.motion_representation.unwrap_or(c.motion_representation);
+    c.motion_schedule = a.motion_schedule.unwrap_or(c.motion_schedule);
     c.deform = a.deform.unwrap_or(c.deform);
     if c.deform == super::config::DeformMode::Off && a.motion_weight.is_none() {
         c.motion_weight = 0.0; // a static model has no motion term; --deform off says so
@@ -252,6 +282,8 @@ pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig>
     sm.blur_photo = a.flow_blur_photo.unwrap_or(sm.blur_photo);
     sm.texture = a.flow_texture.unwrap_or(sm.texture);
     sm.level = a.flow_level.unwrap_or(sm.level);
+    sm.kind = a.scene_motion.unwrap_or(sm.kind);
+    sm.mask_px = a.motion_mask.unwrap_or(sm.mask_px);
     c.keep_checkpoints |= a.keep_checkpoints;
     c.validate()?;
     Ok(c)

@@ -5,6 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
+pub use super::method::{MotionRepresentation, MotionSchedule, SceneMotionKind};
 use crate::error::{Error, Result};
 
 /// Most Gaussians a run may be configured for: 45 higher-band SH floats per Gaussian must stay
@@ -176,6 +177,14 @@ pub struct TrainConfig {
     /// How the scene motion is measured and made robust (see [`SceneMotionConfig`]).
     #[serde(default)]
     pub scene_motion: SceneMotionConfig,
+    /// What the motion term supervises: the displacement flow (DispFlow-GS) or the Gaussian
+    /// flow (GaussianFlow / MotionGS); see `train::method`.
+    #[serde(default)]
+    pub motion_representation: MotionRepresentation,
+    /// The motion weight's schedule (TS): ramp (on from `motion_start`, 0.1·α → α) or off
+    /// (the full α from the end of the deformation warm-up).
+    #[serde(default)]
+    pub motion_schedule: MotionSchedule,
     /// Keep every checkpoint as `checkpoints/NNNNNN.ckpt` besides `last.ckpt` (for
     /// `dispflow-vk signal`, which scores the scene motion at several stages of one run).
     #[serde(default)]
@@ -201,6 +210,12 @@ pub struct SceneMotionConfig {
     pub texture: f32,
     /// Finest pyramid level the flow is solved at (0 = full resolution), upsampled after.
     pub level: u32,
+    /// Which scene motion (see [`SceneMotionKind`]): direct (the method), indirect (MotionGS)
+    /// or none (the raw pair flow).
+    pub kind: SceneMotionKind,
+    /// Motion-mask filtering: scene motion shorter than this many pixels is set to 0 (the
+    /// paper's "motion mask filtering" ablation); 0 = off.
+    pub mask_px: f32,
 }
 
 impl Default for SceneMotionConfig {
@@ -212,6 +227,8 @@ impl Default for SceneMotionConfig {
             blur_photo: 0,
             texture: 0.0,
             level: 0,
+            kind: SceneMotionKind::Direct,
+            mask_px: 0.0,
         }
     }
 }
@@ -237,6 +254,7 @@ impl SceneMotionConfig {
         crate::train::passes::SignalConfig {
             residual: self.residual,
             sigma: self.confidence,
+            mask_px: self.mask_px,
         }
     }
 }
@@ -392,6 +410,8 @@ impl TrainConfig {
             init_filter: false,
             sparsity: SparsityConfig::default(),
             scene_motion: SceneMotionConfig::default(),
+            motion_representation: MotionRepresentation::Displacement,
+            motion_schedule: MotionSchedule::Ramp,
             keep_checkpoints: false,
         }
     }
@@ -652,6 +672,10 @@ impl TrainConfig {
                 "true with motion_flow = \"oracle\"",
                 "false (the oracle has no reconstruction error to remove)",
             )?;
+        }
+        non_negative("scene_motion.mask_px", sm.mask_px as f64)?;
+        if self.motion_weight > 0.0 {
+            super::method::validate(self)?;
         }
         let sp = &self.sparsity;
         non_negative("sparsity.threshold_px", sp.threshold_px as f64)?;

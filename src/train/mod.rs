@@ -9,6 +9,7 @@ pub mod config;
 pub mod curve;
 pub mod frames;
 pub mod init;
+pub mod method;
 pub mod outputs;
 pub mod passes;
 pub mod plan;
@@ -28,15 +29,17 @@ use crate::model::gaussians::HostGaussians;
 use crate::model::state::{mlp_config_for, DeformState, GaussianState, Model};
 use crate::vk::{Gpu, Recorder, Timings};
 use checkpoint::Checkpoint;
-use config::{DeformMode, MotionFlow, MotionOrder, NormGrad, SparsityMode, TrainConfig};
+use config::{
+    DeformMode, MotionFlow, MotionOrder, NormGrad, SceneMotionKind, SparsityMode, TrainConfig,
+};
 use frames::GpuFrame;
-use passes::motion::{OpticalFlow, OracleFlow};
+use passes::motion::{IndirectFlow, MotionVariant, OpticalFlow, OracleFlow};
 use passes::sparsity::{Classifier, ProbeConfig, SplitStats};
-use passes::SceneSignal;
 use passes::{
     AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass,
     SceneMotion, StepSizes,
 };
+use passes::{SceneSignal, Slot};
 use plan::{Decomposition, FrameTimes, StepPlan};
 use step::StepPasses;
 
@@ -213,10 +216,11 @@ impl<'g> Trainer<'g> {
                 s.render.grow(self.gpu, o.needed)?;
                 again = true;
             }
-            if let Some(m) = s.motion.as_mut().filter(|_| p.motion.is_some()) {
+            let m = s.motion.as_mut().filter(|_| p.motion.is_some());
+            if let Some(m) = m.filter(|m| m.rendered_intermediate().is_some()) {
                 let o = s.watch.read(1);
                 if o.overflowed {
-                    m.inter.grow(self.gpu, o.needed)?;
+                    m.grow_intermediate(self.gpu, o.needed)?;
                     again = true;
                 }
             }
@@ -302,6 +306,20 @@ impl<'g> Trainer<'g> {
         (0..self.val.len())
             .map(|i| self.evaluate_one(i, want_images))
             .collect()
+    }
+
+    /// ∂L/∂(MLP output at t2) [N,10] of the last step when it ran a motion term: the motion
+    /// term's only way into the MLP's second pass (tests: "the term reaches the deformation").
+    pub fn motion_output_grad(&self) -> Result<Option<Vec<f32>>> {
+        let ran = self.last_plan.is_some_and(|p| p.motion.is_some());
+        match self.passes.as_ref().filter(|_| ran) {
+            Some(p) => {
+                let n = self.model.gaussians.n as u64;
+                let g = p.deform.output_grad(Slot::T2);
+                Ok(Some(self.gpu.read(g.buf.slice(g.offset, n * 40))?))
+            }
+            None => Ok(None),
+        }
     }
 
     /// Loss values and frame id of the last step (read from host memory after its submit).
@@ -439,15 +457,22 @@ fn build_passes(
     frames: &[GpuFrame],
 ) -> Result<StepPasses> {
     let motion_on = cfg.motion_weight > 0.0;
-    let roles = Decomposition::of(cfg.motion_order);
+    let variant = MotionVariant {
+        roles: Decomposition::of(cfg.motion_order),
+        representation: cfg.motion_representation,
+        scene: cfg.scene_motion.kind,
+    };
     let motion = if motion_on {
-        let source: Box<dyn SceneMotion> = match cfg.motion_flow {
-            MotionFlow::Tvl1 => Box::new(OpticalFlow::new(
-                gpu,
-                cfg.scene_motion.flow_config(&cfg.flow_preset)?,
-                sizes,
-            )?),
-            MotionFlow::Oracle => Box::new(OracleFlow),
+        let flow = || cfg.scene_motion.flow_config(&cfg.flow_preset);
+        let source: Box<dyn SceneMotion> = match (cfg.motion_flow, cfg.scene_motion.kind) {
+            (MotionFlow::Oracle, _) => Box::new(OracleFlow),
+            (MotionFlow::Tvl1, SceneMotionKind::Direct) => {
+                Box::new(OpticalFlow::new(gpu, flow()?, sizes)?)
+            }
+            (MotionFlow::Tvl1, kind) => {
+                let subtract = kind == SceneMotionKind::Indirect;
+                Box::new(IndirectFlow::new(gpu, flow()?, sizes, subtract)?)
+            }
         };
         let signal = SceneSignal::new(gpu, source, cfg.scene_motion.signal(), sizes.pixels())?;
         let norm = NormConfig {
@@ -458,16 +483,16 @@ fn build_passes(
             gpu,
             raster.clone(),
             sizes,
-            roles,
+            variant,
             norm,
             signal,
         )?)
     } else {
         None
     };
-    // The photometric render blends δ only when it is the one that splats it.
-    let photo_feats = if motion_on && roles.photo_splats {
-        3
+    // The photometric render blends the motion channels when it is the one that splats them.
+    let photo_feats = if motion_on {
+        variant.photo_features()
     } else {
         0
     };

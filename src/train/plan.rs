@@ -5,7 +5,9 @@
 //! Every choice is hashed from (seed, iteration), never drawn from a running generator, so a
 //! resumed run makes exactly the choices of an uninterrupted one.
 
-use super::config::{Background, DeformMode, MotionOrder, SparsityMode, TimeNoise, TrainConfig};
+use super::config::{
+    Background, DeformMode, MotionOrder, MotionSchedule, SparsityMode, TimeNoise, TrainConfig,
+};
 use crate::model::optim::ExpLr;
 
 /// Facts about the training frames the schedule needs: their times, time order, camera extent.
@@ -170,7 +172,7 @@ impl StepPlan {
         let weight = motion_weight_at(cfg, it);
         // `scene_motion.every`: the term runs on every k-th step from its start (a speed knob).
         let every = cfg.scene_motion.every.max(1);
-        let due = it.saturating_sub(cfg.motion_start) % every == 0;
+        let due = it.saturating_sub(motion_start(cfg)) % every == 0;
         let motion = (weight > 0.0 && due).then(|| {
             let pair = frames.pair(frame, cfg.pair_gap);
             MotionPlan {
@@ -200,6 +202,15 @@ impl StepPlan {
             // Densification renumbers the Gaussians: a split model is probed again at once.
             classify: split_due || (sparse && densify.is_some()),
         }
+    }
+}
+
+/// The first iteration the motion term may run: `motion_start` with the schedule (TS), the
+/// first step after the deformation warm-up without it.
+pub fn motion_start(cfg: &TrainConfig) -> u32 {
+    match cfg.motion_schedule {
+        MotionSchedule::Ramp => cfg.motion_start,
+        MotionSchedule::Off => cfg.warm_up + 1,
     }
 }
 
@@ -239,9 +250,12 @@ pub fn sparsity_at(cfg: &TrainConfig, it: u32) -> (bool, bool) {
 /// α_t of the motion term at 1-based `iteration`: 0 before `motion_start` (or during the
 /// warm-up), then linear from 0.1·α to α over the remaining iterations.
 pub fn motion_weight_at(cfg: &TrainConfig, iteration: u32) -> f32 {
-    let (a, t0, end) = (cfg.motion_weight, cfg.motion_start, cfg.iterations);
+    let (a, t0, end) = (cfg.motion_weight, motion_start(cfg), cfg.iterations);
     if a <= 0.0 || iteration < t0 || iteration <= cfg.warm_up {
         return 0.0;
+    }
+    if cfg.motion_schedule == MotionSchedule::Off {
+        return a;
     }
     let f = if end > t0 {
         (iteration - t0) as f32 / (end - t0) as f32

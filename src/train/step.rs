@@ -1,5 +1,6 @@
 //! One training iteration as a list of pass calls over explicit state: the Deformable-3DGS
-//! step, with the DispFlow-GS motion term in the `if let Some(..)` blocks.
+//! step, with the motion term (DispFlow-GS or a baseline's, `passes::motion`) in the
+//! `if let Some(..)` blocks.
 
 use super::frames::GpuFrame;
 use super::passes::sparsity::Classifier;
@@ -35,22 +36,22 @@ impl StepPasses {
         self.motion.as_ref().filter(|_| p.motion.is_some())
     }
 
-    /// What the photometric render draws: the Gaussians at t1, blending δ when this step's
-    /// motion term splats it there (direct order).
+    /// What the photometric render draws: the Gaussians at t1, blending the motion channels
+    /// when this step's motion term splats them there.
     fn photo<'a>(&'a self, model: &'a Model, p: &StepPlan) -> SplatInputs<'a> {
         let g = model
             .gaussians
             .splats(self.deform.drawn(Slot::T1), p.sh_degree);
         match self.motion_of(p) {
-            Some(m) => m.splat_on(g, m.roles.photo_splats),
+            Some(m) => m.photo_inputs(g),
             None => g,
         }
     }
 
-    /// Upstream gradients of the photometric render: the loss's, plus ∂L/∂F_disp when it
-    /// splatted δ.
+    /// Upstream gradients of the photometric render: the loss's, plus the motion channels'
+    /// when it splatted them.
     fn photo_grads(&self, p: &StepPlan) -> OutputGrads<'_> {
-        let m = self.motion_of(p).filter(|m| m.roles.photo_splats);
+        let m = self.motion_of(p).filter(|m| m.variant.photo_features() > 0);
         OutputGrads {
             rgba: self.loss.d_render(),
             depth: None,
@@ -82,17 +83,25 @@ pub fn record_step(
     if let (Some(mp), Some(m)) = (p.motion, s.motion_of(p)) {
         s.deform.mlp_forward(rec, model, Slot::T2, mp.t2);
         m.displacement(rec, &s.deform, g.n);
-        if m.roles.inter_at_t2 {
+        if m.draws_t2() {
             s.deform.apply(rec, model, Slot::T2, true);
         }
     }
+    // The intermediate render first: Gaussian flow's channels need its projection at t2
+    // before the photometric render blends them.
+    if let (Some(m), Some(pair)) = (s.motion_of(p), pair) {
+        rec.set_zone("intermediate");
+        m.render_intermediate(rec, model, &s.deform, pair, p.sh_degree, &opts);
+    }
     rec.set_zone("raster");
-    s.render.forward(rec, &a.camera, &s.photo(model, p), &opts);
+    let photo = s.photo(model, p);
+    match s.motion_of(p) {
+        Some(m) => m.photo_forward(rec, &s.render, &a.camera, &photo, &opts),
+        None => s.render.forward(rec, &a.camera, &photo, &opts),
+    }
     rec.set_zone("loss");
     s.loss.record(rec, &s.render, a.target.all(), lambda_ssim);
     if let (Some(mp), Some(m), Some(pair)) = (p.motion, s.motion.as_mut(), pair) {
-        rec.set_zone("intermediate");
-        m.render_intermediate(rec, model, &s.deform, pair, p.sh_degree, &opts);
         rec.set_zone("flow");
         m.scene_motion(rec, pair.0, pair.1, &s.render);
         rec.set_zone("motion");
@@ -100,8 +109,11 @@ pub fn record_step(
     }
     rec.set_zone("raster bwd");
     let photo = s.photo(model, p);
-    s.render
-        .backward(rec, &a.camera, &photo, &opts, &s.photo_grads(p));
+    let grads = s.photo_grads(p);
+    match s.motion_of(p) {
+        Some(m) => m.photo_backward(rec, &s.render, &a.camera, &photo, &opts, &grads),
+        None => s.render.backward(rec, &a.camera, &photo, &opts, &grads),
+    }
     if let (Some(m), Some(pair)) = (s.motion_of(p), pair) {
         m.intermediate_backward(rec, model, &s.deform, pair, p.sh_degree, &opts);
     }
@@ -115,6 +127,7 @@ pub fn record_step(
     );
     s.render.copy_appearance_grads(rec, g);
     if let Some(m) = s.motion_of(p) {
+        m.second_render_grads(rec, model, &s.deform);
         m.displacement_backward(rec, &s.deform, &s.render, g.n);
     }
     if p.deform_active {
@@ -127,10 +140,11 @@ pub fn record_step(
     rec.set_zone("densify stats");
     // An overflow of either render discards the step (the host grows and re-runs it).
     s.watch.record(rec, 0, &s.render);
-    if let Some(m) = s.motion_of(p) {
-        s.watch.record(rec, 1, &m.inter);
+    let inter = s.motion_of(p).and_then(|m| m.rendered_intermediate());
+    if let Some(r) = inter {
+        s.watch.record(rec, 1, r);
     }
-    let guard = s.watch.guard(1 + s.motion_of(p).is_some() as u64);
+    let guard = s.watch.guard(1 + inter.is_some() as u64);
     if p.densify_stats {
         s.densify.record_stats(rec, &s.render, g.n, guard);
     }

@@ -167,6 +167,27 @@ impl DeformPass {
             .backward(rec, g.n, &g.canonical(), d_drawn, &grads, d_out);
     }
 
+    /// [`DeformPass::backward`] of a second render of the step (deformed): its drawn-geometry
+    /// gradients added to the canonical gradients and to slot `k`'s output gradient.
+    pub fn backward_add(
+        &self,
+        rec: &mut Recorder<'_>,
+        model: &Model,
+        k: Slot,
+        d_drawn: &Drawn<'_>,
+    ) {
+        let g = &model.gaussians;
+        let grads = g.canonical_grads();
+        let d_out = self.output_grad(k);
+        self.apply
+            .backward_add(rec, g.n, &g.canonical(), d_drawn, &grads, d_out);
+    }
+
+    /// Zeroes slot `k`'s output gradient (before only [`DeformPass::backward_add`] writes it).
+    pub fn clear_output_grad(&self, rec: &mut Recorder<'_>, k: Slot) {
+        rec.fill(self.output_grad(k), 0);
+    }
+
     /// The MLP's weight gradients from slot `k`'s output gradient, written into the model's
     /// MLP gradient buffer or added to it (`accumulate`); over the dynamic rows when split.
     pub fn mlp_backward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, accumulate: bool) {

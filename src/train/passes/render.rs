@@ -55,6 +55,49 @@ impl RenderPass {
         self.raster.backward(rec, &self.bufs, cam, g, o, d);
     }
 
+    /// The projection of [`RenderPass::forward`] alone (its splat records).
+    pub fn project(&self, rec: &mut Recorder<'_>, cam: &Camera, g: &SplatInputs<'_>) {
+        self.raster.forward_project(rec, &self.bufs, cam, g);
+    }
+
+    /// The rest of [`RenderPass::forward`] after [`RenderPass::project`].
+    pub fn blend(&self, rec: &mut Recorder<'_>, cam: &Camera, g: &SplatInputs<'_>, o: &RenderOpts) {
+        self.raster.forward_blend(rec, &self.bufs, cam, g, o);
+    }
+
+    /// The blend half of [`RenderPass::backward`]: the 2D gradient records and feature grads.
+    pub fn backward_blend(
+        &self,
+        rec: &mut Recorder<'_>,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+        o: &RenderOpts,
+        d: &OutputGrads<'_>,
+    ) {
+        self.raster.backward_blend(rec, &self.bufs, cam, g, o, d);
+    }
+
+    /// The projection half of [`RenderPass::backward`], from the 2D gradient records as they
+    /// stand.
+    pub fn backward_project(&self, rec: &mut Recorder<'_>, cam: &Camera, g: &SplatInputs<'_>) {
+        self.raster.backward_project(rec, &self.bufs, cam, g);
+    }
+
+    /// The splat records ([N,3] vec4) of the last projection.
+    pub fn splats(&self) -> BufSlice<'_> {
+        self.bufs.splats.all()
+    }
+
+    /// The per-splat 2D gradient records ([N,12]).
+    pub fn grad2d(&self) -> BufSlice<'_> {
+        self.bufs.grad2d.all()
+    }
+
+    /// [H·W] Σ w·z of the last forward (not normalised by alpha).
+    pub fn depth(&self) -> BufSlice<'_> {
+        self.bufs.out_depth.all()
+    }
+
     pub fn rgba(&self) -> BufSlice<'_> {
         self.bufs.out_rgba.all()
     }

@@ -17,12 +17,14 @@ pub struct SignalConfig {
     /// Confidence scale σ: pixels weigh `exp(−mean|photo − render(v1, t1)| / σ)` in the
     /// motion L1; 0 = every pixel weighs 1.
     pub sigma: f32,
+    /// Motion-mask filtering: scene motion shorter than this (pixels) becomes 0; 0 = off.
+    pub mask_px: f32,
 }
 
 impl SignalConfig {
     /// The `scene_signal` kernel runs (else the source writes the scene motion directly).
     pub fn corrects(&self) -> bool {
-        self.residual || self.sigma > 0.0
+        self.residual || self.sigma > 0.0 || self.mask_px > 0.0
     }
 
     pub fn validate(&self) -> Result<()> {
@@ -30,6 +32,12 @@ impl SignalConfig {
             return Err(Error::Invalid(format!(
                 "config field motion_confidence: {}; expected a finite σ ≥ 0 (0 = off)",
                 self.sigma
+            )));
+        }
+        if !(self.mask_px.is_finite() && self.mask_px >= 0.0) {
+            return Err(Error::Invalid(format!(
+                "config field scene_motion.mask_px: {}; expected a finite length ≥ 0 (0 = off)",
+                self.mask_px
             )));
         }
         Ok(())
@@ -103,8 +111,9 @@ impl SceneSignal {
             scene: self.flow.all(),
             conf: conf.all(),
         };
+        let c = &self.cfg;
         self.kernel
-            .scene_signal(rec, self.pixels, self.cfg.residual, self.cfg.sigma, &io);
+            .scene_signal(rec, self.pixels, c.residual, c.sigma, c.mask_px, &io);
     }
 
     /// The scene motion ([H·W] vec2, pixels) of the last `record`.
