@@ -409,6 +409,9 @@ pub enum Suite {
     /// The DispFlow step with each scene-motion option (flow preset, level, blur, texture,
     /// residual, confidence) next to the baseline step, per zone.
     Motion,
+    /// The step of every compared method (3DGS, Deformable 3DGS, MotionGS, DispFlow-GS) and
+    /// representation × scene-motion cell of the paper's Tab. 5, per zone.
+    Methods,
 }
 
 #[derive(clap::Args, Debug)]
@@ -603,6 +606,10 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
     }
     if has(Suite::Motion) {
         let st = motion::run_motion_bench(&gpu, args.warm_steps, args.steps)?;
+        rows.extend(step::report(&gpu, &st, args.reps)?);
+    }
+    if has(Suite::Methods) {
+        let st = motion::run_method_bench(&gpu, args.warm_steps, args.steps)?;
         rows.extend(step::report(&gpu, &st, args.reps)?);
     }
     if has(Suite::Lpips) {

@@ -239,3 +239,97 @@ fn log_scale_overflow_is_clamped_on_gpu_and_twin() {
 }
 
 dispflow_vk::subgroup_reruns!();
+
+#[test]
+fn backward_add_adds_a_second_renders_gradients() {
+    // backward (render 1) then backward_add (render 2) = the twin's backward of each, summed.
+    let gpu = testing::gpu();
+    let k = DeformApply::new(&gpu).unwrap();
+    let n = 500usize;
+    let mut r = Noise::new(21);
+    let (x, s, q) = (
+        rand(&mut r, 3 * n, 2.0),
+        rand(&mut r, 3 * n, 3.0),
+        rand(&mut r, 4 * n, 1.0),
+    );
+    let (up1, up2) = (rand(&mut r, 10 * n, 1.0), rand(&mut r, 10 * n, 1.0));
+    let b = |name: &str, v: &[f32]| gpu.buffer_from(name, v).unwrap();
+    let (xb, sb, qb) = (b("x", &x), b("s", &s), b("q", &q));
+    let drawn = |up: &[f32]| {
+        [
+            b("m", &up[..3 * n]),
+            b("s", &up[3 * n..6 * n]),
+            b("q", &up[6 * n..]),
+        ]
+    };
+    let (d1, d2) = (drawn(&up1), drawn(&up2));
+    let out: Vec<_> = [3, 3, 4, 10]
+        .iter()
+        .map(|&w| gpu.buffer("out", (w * n * 4) as u64).unwrap())
+        .collect();
+    for o in &out {
+        testing::fill_noise(&gpu, o, 2);
+    }
+    let c = Canonical {
+        means: xb.all(),
+        log_scales: sb.all(),
+        quats: qb.all(),
+    };
+    let grads = Canonical {
+        means: out[0].all(),
+        log_scales: out[1].all(),
+        quats: out[2].all(),
+    };
+    fn as_drawn(d: &[dispflow_vk::vk::Buffer; 3]) -> Drawn<'_> {
+        Drawn {
+            means: d[0].all(),
+            scales: d[1].all(),
+            quats: d[2].all(),
+        }
+    }
+    let mut rec = Recorder::new(&gpu).unwrap();
+    k.backward(
+        &mut rec,
+        n as u32,
+        &c,
+        &as_drawn(&d1),
+        &grads,
+        Some(out[3].all()),
+    );
+    k.backward_add(&mut rec, n as u32, &c, &as_drawn(&d2), &grads, out[3].all());
+    rec.finish().unwrap();
+    let got: Vec<Vec<f32>> = out.iter().map(|o| gpu.read(o.all()).unwrap()).collect();
+    for i in 0..n {
+        let f = |v: &[f32], w: usize| -> Vec<f64> {
+            v[w * i..w * i + w].iter().map(|&a| a as f64).collect()
+        };
+        let bwd = |up: &[f32]| {
+            deform_apply_bwd(
+                f(&s, 3).try_into().unwrap(),
+                f(&q, 4).try_into().unwrap(),
+                f(&up[..3 * n], 3).try_into().unwrap(),
+                f(&up[3 * n..6 * n], 3).try_into().unwrap(),
+                f(&up[6 * n..], 4).try_into().unwrap(),
+            )
+        };
+        let (a, bb) = (bwd(&up1), bwd(&up2));
+        let sum =
+            |u: &[f64], v: &[f64]| -> Vec<f64> { u.iter().zip(v).map(|(p, q)| p + q).collect() };
+        let want = [
+            sum(&a.0, &bb.0),
+            sum(&a.1, &bb.1),
+            sum(&a.2, &bb.2),
+            sum(&a.3, &bb.3),
+        ];
+        for (o, (w, width)) in want.iter().zip([3, 3, 4, 10]).enumerate() {
+            for c in 0..width {
+                let g = got[o][width * i + c] as f64;
+                assert!(
+                    (g - w[c]).abs() <= 1e-5 * (1.0 + w[c].abs()),
+                    "output {o} Gaussian {i} component {c}: gpu {g} twin sum {}",
+                    w[c]
+                );
+            }
+        }
+    }
+}

@@ -379,3 +379,23 @@ fn confidence_is_low_where_the_render_misses_an_occluder() {
 }
 
 dispflow_vk::subgroup_reruns!();
+
+#[test]
+fn grad_add_adds_elementwise() {
+    let gpu = testing::gpu();
+    let k = DispFlow::new(&gpu).unwrap();
+    let n = 70_001usize;
+    let mut r = Noise::new(31);
+    let (a, b) = (rand(&mut r, n), rand(&mut r, n));
+    let (ab, bb) = (
+        gpu.buffer_from("src", &a).unwrap(),
+        gpu.buffer_from("dst", &b).unwrap(),
+    );
+    let mut rec = Recorder::new(&gpu).unwrap();
+    k.grad_add(&mut rec, n as u32, ab.all(), bb.all());
+    rec.finish().unwrap();
+    let got: Vec<f32> = gpu.read(bb.all()).unwrap();
+    for i in 0..n {
+        assert_eq!(got[i], a[i] + b[i], "element {i}");
+    }
+}

@@ -60,6 +60,8 @@ pub enum Method {
     #[serde(rename = "3dgs")]
     Gs3d,
     /// Deformable-3DGS: the deformation MLP, photometric loss only.
+    #[value(name = "deformable-3dgs")]
+    #[serde(rename = "deformable-3dgs")]
     Deformable3dgs,
     /// MotionGS: Gaussian flow supervised with indirect scene motion.
     Motiongs,

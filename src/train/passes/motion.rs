@@ -201,7 +201,7 @@ enum Rep {
     /// δ [N,3], the normalisation of its magnitude map and ∂L/∂m̂_disp.
     Displacement {
         delta: Buffer,
-        norm_disp: NormBuffers,
+        norm_disp: Box<NormBuffers>,
         d_mhat: Buffer,
     },
     /// The six channels per Gaussian.
@@ -256,7 +256,7 @@ impl MotionTerm {
         } else {
             Rep::Displacement {
                 delta: gpu.buffer("displacement", s.capacity as u64 * row::VEC3 * 4)?,
-                norm_disp: norm.buffers(gpu, s.width, s.height, 3)?,
+                norm_disp: Box::new(norm.buffers(gpu, s.width, s.height, 3)?),
                 d_mhat: gpu.buffer("d normalised displacement magnitude", px * 4)?,
             }
         };
