@@ -61,7 +61,7 @@ pub struct TrainArgs {
     /// Seed of everything random (initial points, frame order, MLP init) [default: 0].
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Weight α of the displacement-flow motion loss (DispFlow-GS); 0 = the Deformable-3DGS
+    /// Weight α of the motion loss (displacement or Gaussian flow); 0 = the Deformable-3DGS
     /// baseline [default: 0.1].
     #[arg(long)]
     pub motion_weight: Option<f32>,

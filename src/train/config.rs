@@ -140,7 +140,7 @@ pub struct TrainConfig {
     /// `log.jsonl`; 0 = never.
     #[serde(default)]
     pub test_interval: u32,
-    /// Motion (displacement-flow) loss weight α; 0 = the Deformable-3DGS baseline.
+    /// Motion loss weight α (displacement or Gaussian flow); 0 = the Deformable-3DGS baseline.
     pub motion_weight: f32,
     /// Iteration t0 from which the motion term is on (α_t ramps from 0.1·α to α after it).
     pub motion_start: u32,

@@ -17,7 +17,7 @@ use crate::kernels::dispflow::{CameraFlowParams, DispFlow};
 use crate::kernels::flow::{FlowConfig, FlowEstimator, FlowScratch, TvL1Flow};
 use crate::kernels::gflow::{GFlowLossIo, GaussianFlow, GF_FEAT};
 use crate::kernels::motion::{MotionNorm, NormBuffers, NormConfig};
-use crate::kernels::raster::{OutputGrads, Rasterizer, RenderOpts, SplatInputs};
+use crate::kernels::raster::{Camera, OutputGrads, Rasterizer, RenderOpts, SplatInputs};
 use crate::model::state::Model;
 use crate::train::frames::GpuFrame;
 use crate::train::method::{MotionRepresentation, SceneMotionKind};
@@ -357,7 +357,7 @@ impl MotionTerm {
         }
     }
 
-    fn inter_camera(&self, (a, b): (&GpuFrame, &GpuFrame)) -> crate::kernels::raster::Camera {
+    fn inter_camera(&self, (a, b): (&GpuFrame, &GpuFrame)) -> Camera {
         if self.roles.inter_at_pair_view {
             b.camera
         } else {
@@ -371,7 +371,7 @@ impl MotionTerm {
         &self,
         rec: &mut Recorder<'_>,
         photo: &RenderPass,
-        cam: &crate::kernels::raster::Camera,
+        cam: &Camera,
         g: &SplatInputs<'_>,
         opts: &RenderOpts,
     ) {
@@ -478,7 +478,7 @@ impl MotionTerm {
         &self,
         rec: &mut Recorder<'_>,
         photo: &RenderPass,
-        cam: &crate::kernels::raster::Camera,
+        cam: &Camera,
         g: &SplatInputs<'_>,
         opts: &RenderOpts,
         grads: &OutputGrads<'_>,
