@@ -193,7 +193,10 @@ fn eval_and_render_a_tiny_run() {
 
     let combined = Table::parse_markdown(&std::fs::read_to_string(&table_path).unwrap()).unwrap();
     assert_eq!(combined.rows.len(), 2);
-    assert!(combined.rows[1][0].starts_with("Deformable 3DGS"), "the paper's row name");
+    assert!(
+        combined.rows[1][0].starts_with("Deformable 3DGS"),
+        "the paper's row name"
+    );
 
     // Pictures: one strip per test frame (render, gt, error, displacement flow, optical flow,
     // mask, dynamic mask: 7 panels of 64×64
