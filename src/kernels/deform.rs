@@ -104,6 +104,38 @@ impl DeformApply {
         grads: &Canonical<'_>,
         d_deform: Option<BufSlice<'_>>,
     ) {
+        let pipe = match d_deform {
+            Some(_) => &self.bwd,
+            None => &self.bwd_static,
+        };
+        Self::record_bwd(rec, pipe, n, c, d_drawn, grads, d_deform);
+    }
+
+    /// [`DeformApply::backward`] with the MLP output, added to `grads` and `d_deform`
+    /// instead of written (a second render of the same step).
+    pub fn backward_add(
+        &self,
+        rec: &mut Recorder<'_>,
+        n: u32,
+        c: &Canonical<'_>,
+        d_drawn: &Drawn<'_>,
+        grads: &Canonical<'_>,
+        d_deform: BufSlice<'_>,
+    ) {
+        Self::record_bwd(rec, &self.bwd_add, n, c, d_drawn, grads, Some(d_deform));
+    }
+
+    /// One backward dispatch: the three variants share their bindings (the MLP-output
+    /// gradient last, when bound).
+    fn record_bwd(
+        rec: &mut Recorder<'_>,
+        pipe: &ComputePipeline,
+        n: u32,
+        c: &Canonical<'_>,
+        d_drawn: &Drawn<'_>,
+        grads: &Canonical<'_>,
+        d_deform: Option<BufSlice<'_>>,
+    ) {
         let pc = DeformParams {
             n,
             ..Default::default()
@@ -118,42 +150,7 @@ impl DeformApply {
             grads.log_scales,
             grads.quats,
         ];
-        let pipe = match d_deform {
-            Some(d) => {
-                binds.push(d);
-                &self.bwd
-            }
-            None => &self.bwd_static,
-        };
+        binds.extend(d_deform);
         rec.dispatch_rows(pipe, &pc, &binds, n);
-    }
-
-    /// [`DeformApply::backward`] with the MLP output, added to `grads` and `d_deform`
-    /// instead of written (a second render of the same step).
-    pub fn backward_add(
-        &self,
-        rec: &mut Recorder<'_>,
-        n: u32,
-        c: &Canonical<'_>,
-        d_drawn: &Drawn<'_>,
-        grads: &Canonical<'_>,
-        d_deform: BufSlice<'_>,
-    ) {
-        let pc = DeformParams {
-            n,
-            ..Default::default()
-        };
-        let binds = [
-            c.log_scales,
-            c.quats,
-            d_drawn.means,
-            d_drawn.scales,
-            d_drawn.quats,
-            grads.means,
-            grads.log_scales,
-            grads.quats,
-            d_deform,
-        ];
-        rec.dispatch_rows(&self.bwd_add, &pc, &binds, n);
     }
 }
