@@ -651,6 +651,7 @@ mod gpu_step {
             mask: None,
             prev_time: None,
             gt_flow: None,
+            next_flow: None,
         };
         let frames = [frame(T1), frame(T2)];
         // Learning rates 0: the step's gradients are read after it, parameters stay put.

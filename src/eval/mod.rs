@@ -4,7 +4,9 @@
 //! commands ([`run`], [`render`]). The [`Evaluator`] owns its scratch: evaluating never
 //! touches a training buffer.
 
+pub mod epe;
 pub mod lpips;
+pub mod regions;
 pub mod render;
 pub mod report;
 pub mod run;
@@ -51,6 +53,13 @@ pub struct FrameEval {
     pub l1: f64,
     /// The frame has a motion mask with at least one moving pixel.
     pub has_mask: bool,
+    /// PSNR inside the motion mask dilated by [`regions::MASK_DILATE_PX`] (`None`: no mask or
+    /// an empty one): where a smeared, ghosted or missing moving object shows.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dynamic_psnr: Option<f64>,
+    /// PSNR outside that dilated mask (`None` likewise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub static_psnr: Option<f64>,
     /// AP of the normalised displacement flow against the mask (`None`: no mask, an empty
     /// mask, or no earlier time in the dataset).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -187,16 +196,16 @@ impl Evaluator {
         )
     }
 
-    /// Photometric values of test frame `f` alone (no motion metrics, no pictures).
+    /// Photometric scores of test frame `f` alone (PSNR, SSIM, L1 and the region PSNRs; no
+    /// motion metrics, no pictures).
     pub fn photometric(
         &mut self,
         gpu: &Gpu,
         model: &Model,
         view: ModelView,
         f: &GpuFrame,
-    ) -> Result<LossValues> {
-        self.evaluate(gpu, model, view, Shot::of_frame(f, None), false)?;
-        Ok(self.loss.values())
+    ) -> Result<FrameEval> {
+        self.evaluate(gpu, model, view, Shot::of_frame(f, None), false)
     }
 
     /// Renders `(camera, t)` (black background) and, with `prev`, the displacement flow since
@@ -235,9 +244,62 @@ impl Evaluator {
             Some(s) => s.flags,
             None => vec![1; n],
         };
-        let feats: Vec<f32> = flags.iter().flat_map(|&f| [f as f32; 3]).collect();
+        let feats: Vec<[f32; 3]> = flags.iter().map(|&f| [f as f32; 3]).collect();
+        let f = self.blend_features(gpu, model, view, camera, t, &feats)?;
+        Ok(f.chunks_exact(3).map(|c| c[0]).collect())
+    }
+
+    /// The displacement EPE probe of test frame `f` ([`epe`]): `None` unless the frame has a
+    /// mask and ground-truth flow towards a next time.
+    pub fn motion_probe(
+        &mut self,
+        gpu: &Gpu,
+        model: &Model,
+        view: ModelView,
+        f: &GpuFrame,
+    ) -> Result<Option<epe::MotionProbe>> {
+        let (Some((t_next, gt)), Some((_, mask))) = (&f.next_flow, &f.mask) else {
+            return Ok(None);
+        };
+        let n = model.gaussians.n as usize;
+        let mut rec = Recorder::new(gpu)?;
+        let active = view.deform_active;
+        self.deform
+            .forward(&mut rec, model, Slot::T1, active.then_some(f.time));
+        self.deform
+            .forward(&mut rec, model, Slot::T2, active.then_some(*t_next));
+        rec.finish()?;
+        let a: Vec<[f32; 3]> = gpu.read(self.deform.drawn(Slot::T1)[0])?;
+        let b: Vec<[f32; 3]> = gpu.read(self.deform.drawn(Slot::T2)[0])?;
+        let motion = epe::projected_motion(&f.camera, &a[..n], &b[..n]);
+        let blended = self.blend_features(gpu, model, view, &f.camera, f.time, &motion)?;
+        Ok(Some(epe::MotionProbe {
+            epe: epe::masked_epe(&blended, gt, mask),
+            gt_len: epe::masked_len(gt, mask),
+            p50: epe::motion_quantile(&motion, 0.5),
+            p99: epe::motion_quantile(&motion, 0.99),
+        }))
+    }
+
+    /// Renders `(camera, t)` with per-Gaussian 3-channel `feats` and returns the blended
+    /// features ([H·W] × 3): Σ_i w_i f_i with the render's own weights.
+    #[allow(clippy::too_many_arguments)] // the view's parts, each one named
+    pub fn blend_features(
+        &mut self,
+        gpu: &Gpu,
+        model: &Model,
+        view: ModelView,
+        camera: &Camera,
+        t: f32,
+        feats: &[[f32; 3]],
+    ) -> Result<Vec<f32>> {
+        let n = model.gaussians.n as usize;
+        assert_eq!(feats.len(), n, "one feature row per Gaussian");
         if n > 0 {
-            gpu.upload(self.delta.elems::<f32>(0, feats.len() as u64), &feats)?;
+            gpu.upload(
+                self.delta.elems::<f32>(0, 3 * n as u64),
+                bytemuck::cast_slice::<[f32; 3], f32>(feats),
+            )?;
         }
         let opts = RenderOpts {
             background: [0.0; 3],
@@ -261,8 +323,7 @@ impl Evaluator {
                 continue;
             }
             let px = camera.width as u64 * camera.height as u64;
-            let f: Vec<f32> = gpu.read(self.render.features().buf.elems::<f32>(0, 3 * px))?;
-            return Ok(f.chunks_exact(3).map(|c| c[0]).collect());
+            return gpu.read(self.render.features().buf.elems::<f32>(0, 3 * px));
         }
     }
 
@@ -443,13 +504,32 @@ impl Evaluator {
             ),
             None => (None, None),
         };
-        let images = if want_images {
-            let n = px as usize;
+        let has_mask = mask.is_some_and(|m| m.1.iter().any(|&v| v != 0));
+        let host = |want: bool| -> Result<(Vec<[f32; 4]>, Vec<[f32; 4]>)> {
+            if !want {
+                return Ok((Vec::new(), Vec::new()));
+            }
             let render: Vec<[f32; 4]> = gpu.read(self.full.elems::<[f32; 4]>(0, px))?;
             let gt: Vec<[f32; 4]> = match frame {
                 Some(f) => gpu.read(f.target.elems::<[f32; 4]>(0, px))?,
                 None => Vec::new(),
             };
+            Ok((render, gt))
+        };
+        let (render, gt) = host(want_images || has_mask)?;
+        let regions = match mask {
+            Some((_, m)) if has_mask => regions::region_psnr(
+                &render,
+                &gt,
+                m,
+                cam.width,
+                cam.height,
+                regions::MASK_DILATE_PX,
+            ),
+            _ => regions::RegionPsnr::default(),
+        };
+        let images = if want_images {
+            let n = px as usize;
             let motion: Vec<f32> = match prev {
                 Some(_) => gpu.read(self.norm_bufs.m_hat())?,
                 None => vec![0.0; n],
@@ -480,7 +560,9 @@ impl Evaluator {
             psnr: values.psnr,
             ssim: values.ssim,
             l1: values.l1,
-            has_mask: mask.is_some_and(|m| m.1.iter().any(|&v| v != 0)),
+            has_mask,
+            dynamic_psnr: regions.dynamic,
+            static_psnr: regions.static_,
             ap,
             drc,
             flow_ap,

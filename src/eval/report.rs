@@ -28,6 +28,12 @@ pub struct Report {
     pub mmap: Option<f64>,
     /// Mean DRC over test frames that have an earlier time in the dataset.
     pub drc: Option<f64>,
+    /// Mean PSNR inside the dilated motion masks, and outside them, over the test frames with
+    /// a non-empty mask (absent without masks): a smeared or missing moving object shows here.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dynamic_psnr: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub static_psnr: Option<f64>,
     /// MMAP of the optical flow frozen render → ground truth: how well the motion loss's
     /// signal separates moving pixels.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -56,6 +62,10 @@ pub struct Report {
     /// from `log.jsonl`, across resumes).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub time_to_psnr: Vec<crate::train::curve::TimeTo>,
+    /// Collapses the run confirmed (`train` only; from `log.jsonl`, across resumes): when,
+    /// the windowed training PSNR before and after, and any rollback.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub collapses: Vec<crate::train::collapse::CollapseEvent>,
     pub per_frame: Vec<FrameEval>,
 }
 
@@ -99,6 +109,8 @@ impl Report {
             lpips_note: "unavailable: no --lpips-weights given".into(),
             mmap,
             drc,
+            dynamic_psnr: mean_some(per.iter().map(|e| e.dynamic_psnr)),
+            static_psnr: mean_some(per.iter().map(|e| e.static_psnr)),
             flow_mmap,
             initial_psnr: None,
             ms_per_step: None,
@@ -107,6 +119,7 @@ impl Report {
             ms_per_step_by_phase: Vec::new(),
             train_seconds: None,
             time_to_psnr: Vec::new(),
+            collapses: Vec::new(),
             per_frame: per,
         }
     }
@@ -140,6 +153,12 @@ pub fn motion_means(per: &[FrameEval]) -> (Option<f64>, Option<f64>) {
     (mmap, drc)
 }
 
+/// Mean of the finite values present (`None` when there are none).
+pub fn mean_some(v: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let f: Vec<f64> = v.flatten().filter(|x| x.is_finite()).collect();
+    (!f.is_empty()).then(|| f.iter().sum::<f64>() / f.len() as f64)
+}
+
 /// Mean of the finite values (NaN when there are none).
 pub fn mean(v: impl Iterator<Item = f64>) -> f64 {
     let f: Vec<f64> = v.filter(|x| x.is_finite()).collect();
@@ -165,10 +184,12 @@ pub fn method_name(cfg: &TrainConfig) -> String {
     name
 }
 
-const TABLE_HEADERS: [&str; 7] = [
+const TABLE_HEADERS: [&str; 9] = [
     "Method",
     "Scene",
     "PSNR ↑",
+    "dyn PSNR ↑",
+    "static PSNR ↑",
     "SSIM ↑",
     "LPIPS ↓",
     "MMAP ↑",
@@ -186,6 +207,8 @@ pub fn table(reports: &[Report]) -> Table {
                     format!("{} [{}]", r.method, r.run),
                     r.scene.clone(),
                     report::fmt_metric(Some(r.psnr), 2),
+                    report::fmt_metric(r.dynamic_psnr, 2),
+                    report::fmt_metric(r.static_psnr, 2),
                     report::fmt_metric(Some(r.ssim), 4),
                     report::fmt_metric(r.lpips, 4),
                     report::fmt_metric(r.mmap, 4),

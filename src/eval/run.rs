@@ -377,9 +377,11 @@ fn eval_one(
         }
     }
     eprintln!(
-        "{}: PSNR {:.2} SSIM {:.4} MMAP {} DRC {} (optical-flow MMAP {}) → {}",
+        "{}: PSNR {:.2} (dynamic {}, static {}) SSIM {:.4} MMAP {} DRC {} (optical-flow MMAP {}) → {}",
         run.dir.display(),
         r.psnr,
+        report::fmt_metric(r.dynamic_psnr, 2),
+        report::fmt_metric(r.static_psnr, 2),
         r.ssim,
         report::fmt_metric(r.mmap, 4),
         report::fmt_metric(r.drc, 4),
@@ -463,7 +465,11 @@ fn per_frame_plot(per: &[FrameEval]) -> Result<image::RgbImage> {
         title: "test PSNR per frame".into(),
         x_label: "time".into(),
         y_label: "PSNR (dB)".into(),
-        series: vec![series("PSNR", &|e| Some(e.psnr), 0)],
+        series: vec![
+            series("PSNR", &|e| Some(e.psnr), 0),
+            series("dynamic (dilated mask)", &|e| e.dynamic_psnr, 3),
+            series("static", &|e| e.static_psnr, 4),
+        ],
         width: 640,
         height: 240,
     };
@@ -479,6 +485,37 @@ fn per_frame_plot(per: &[FrameEval]) -> Result<image::RgbImage> {
         height: 240,
     };
     report::stacked(&[psnr.render()?, motion.render()?])
+}
+
+type LogValue<'a> = (&'a str, &'a dyn Fn(&LogLine) -> Option<f64>);
+
+/// Probe values of the log against iterations, a series each.
+fn probe_plot(
+    title: &str,
+    y: &str,
+    log: &[LogLine],
+    series: &[LogValue<'_>],
+) -> Result<image::RgbImage> {
+    Plot {
+        title: title.into(),
+        x_label: "iteration".into(),
+        y_label: y.into(),
+        series: series
+            .iter()
+            .enumerate()
+            .map(|(c, (label, f))| Series {
+                label: label.to_string(),
+                points: log
+                    .iter()
+                    .filter_map(|l| f(l).map(|v| (l.iteration as f64, v)))
+                    .collect(),
+                color: PALETTE[c % PALETTE.len()],
+            })
+            .collect(),
+        width: 640,
+        height: 200,
+    }
+    .render()
 }
 
 /// Reads a run's `log.jsonl`, naming the line of a malformed entry.
@@ -533,6 +570,33 @@ pub fn training_plot(log: &[LogLine]) -> Result<image::RgbImage> {
             &[(String::new(), log)],
             640,
             200,
+        )?);
+    }
+    if log.iter().any(|l| l.test_dynamic_psnr.is_some()) {
+        plots.push(probe_plot(
+            "test PSNR by region (probe frames)",
+            "PSNR (dB)",
+            log,
+            &[
+                ("whole image", &|l| l.test_psnr),
+                ("dynamic (dilated mask)", &|l| l.test_dynamic_psnr),
+                ("static", &|l| l.test_static_psnr),
+            ],
+        )?);
+    }
+    if log.iter().any(|l| l.motion_epe.is_some()) {
+        plots.push(probe_plot(
+            "the model's motion against the ground-truth flow (probe frames)",
+            "pixels",
+            log,
+            &[
+                ("EPE inside the masks", &|l| l.motion_epe),
+                ("ground-truth flow length (EPE of no motion)", &|l| {
+                    l.motion_gt_px
+                }),
+                ("Gaussians' motion p50", &|l| l.motion_p50_px),
+                ("Gaussians' motion p99", &|l| l.motion_p99_px),
+            ],
         )?);
     }
     report::stacked(&plots)

@@ -39,6 +39,9 @@ pub struct Checkpoint {
     pub model: ModelSnapshot,
     /// Densification statistics per Gaussian: gradient accumulator, count, max radius.
     pub densify_stats: [Vec<f32>; 3],
+    /// The deformation rate's multiplier after collapse rollbacks (`None`: 1, never rolled
+    /// back), so a resumed run keeps the rate the rollback chose.
+    pub deform_lr_scale: Option<f64>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -49,6 +52,8 @@ struct Header {
     sh_coeffs: u32,
     shape: ModelShape,
     blobs: Vec<BlobEntry>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    deform_lr_scale: Option<f64>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -187,6 +192,7 @@ impl Checkpoint {
             iteration: self.iteration,
             sh_coeffs: self.model.gaussians.sh_coeffs,
             shape: self.model.shape,
+            deform_lr_scale: self.deform_lr_scale,
             blobs: blobs
                 .iter()
                 .map(|(k, v)| BlobEntry {
@@ -361,8 +367,17 @@ impl Checkpoint {
         if let Some(k) = m.keys().next() {
             return Err(bad(path, &format!("unexpected blob {k}")));
         }
+        if let Some(v) = header.deform_lr_scale {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(
+                    path,
+                    &format!("header: deform_lr_scale {v}; expected a positive finite number"),
+                ));
+            }
+        }
         Ok(Checkpoint {
             iteration: header.iteration,
+            deform_lr_scale: header.deform_lr_scale,
             model: ModelSnapshot {
                 shape: header.shape,
                 gaussians,

@@ -163,6 +163,13 @@ pub struct TrainArgs {
     /// about 4× cheaper), upsampled afterwards [preset: paper 0, fast 1].
     #[arg(long)]
     pub flow_level: Option<u32>,
+    /// What a collapse does (a non-finite loss, or the windowed training PSNR falling by
+    /// `collapse.drop_db` (2 dB) below its best for a window): warn (say so in the progress
+    /// line, log.jsonl and metrics.json; a non-finite loss stops the run) or rollback
+    /// (restore the last good in-memory checkpoint and go on with the deformation rate
+    /// halved, at most 8 times) [default: warn].
+    #[arg(long, value_enum)]
+    pub on_collapse: Option<super::collapse::OnCollapse>,
     /// Keep every checkpoint as OUT/checkpoints/NNNNNN.ckpt (for `dispflow-vk signal`).
     #[arg(long)]
     pub keep_checkpoints: bool,
@@ -285,6 +292,7 @@ pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig>
     sm.kind = a.scene_motion.unwrap_or(sm.kind);
     sm.mask_px = a.motion_mask.unwrap_or(sm.mask_px);
     c.keep_checkpoints |= a.keep_checkpoints;
+    c.collapse.on_collapse = a.on_collapse.unwrap_or(c.collapse.on_collapse);
     c.validate()?;
     Ok(c)
 }
@@ -404,6 +412,8 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     let mut split_seen = None;
     let probes = super::curve::probe_frames(tr.val.len());
     let mut worst = super::curve::WorstView::default();
+    let mut guard = super::guard::CollapseGuard::new(&tr)?;
+    let mut collapse = None;
     let mut log_file = std::fs::OpenOptions::new()
         .append(true)
         .open(&log_path)
@@ -417,10 +427,58 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         let t0 = Instant::now();
         let info = tr.step(log, log && a.verbose)?;
         step_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        let done = tr.last_plan.expect("a step ran");
         if let Some((v, id)) = tr.last_loss() {
             worst.see(v.psnr, id);
+            if let Some(ev) = guard.after_step(&mut tr, &done, v.loss, v.psnr)? {
+                let what = match ev.rolled_back_to {
+                    Some(r) => {
+                        // The abandoned iterations' lines go; the next line carries the event.
+                        truncate_log(&log_path, r)?;
+                        format!(
+                            "; rolled back to iteration {r}, deformation rate ×{}",
+                            tr.deform_lr_scale
+                        )
+                    }
+                    None => " (--on-collapse rollback would restore an earlier state)".into(),
+                };
+                pb.suspend(|| {
+                    eprintln!(
+                        "collapse at iteration {}: {}, windowed training PSNR {:.2} → {:.2} dB{what}",
+                        ev.iteration,
+                        ev.kind.replace('_', " "),
+                        ev.before_db,
+                        ev.after_db
+                    )
+                });
+                if ev.rolled_back_to.is_none() && ev.kind == "non_finite_loss" {
+                    let line = LogLine {
+                        iteration: ev.iteration,
+                        loss: v.loss,
+                        psnr: v.psnr,
+                        num_gaussians: tr.n(),
+                        collapse: Some(ev.clone()),
+                        ..LogLine::default()
+                    };
+                    let text = serde_json::to_string(&line).expect("log line serialises");
+                    std::io::Write::write_all(&mut log_file, format!("{text}\n").as_bytes())
+                        .map_err(io(&log_path))?;
+                    return Err(Error::Invalid(format!(
+                        "iteration {}: the loss is not finite ({:?}); rerun with --on-collapse \
+                         rollback to restore an earlier state with a lower deformation rate",
+                        ev.iteration, v
+                    )));
+                }
+                let rolled_back = ev.rolled_back_to.is_some();
+                collapse = Some(ev);
+                if rolled_back {
+                    // A resumed run must not return to the abandoned branch.
+                    tr.checkpoint()?.save(&ckpt)?;
+                    pb.set_position(tr.iteration as u64);
+                    continue;
+                }
+            }
         }
-        let done = tr.last_plan.expect("a step ran");
         let phase = match (done.deform_active, done.sparse) {
             (false, _) => "no MLP",
             (true, false) => "MLP over all",
@@ -458,11 +516,12 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
             }
             let dynamic = tr.dynamic_fraction();
             // Not counted in the training time: the probe is a measurement, not training.
-            let test_psnr = if test {
-                Some(tr.test_psnr(&probes)?)
+            let probe = if test {
+                Some(tr.probe(&probes, true)?)
             } else {
                 None
             };
+            let test_psnr = probe.map(|p| p.psnr);
             let worst = worst.take();
             let msg = format!(
                 "loss {:.4} psnr {:.2} (worst view {}){} gaussians {} dynamic {:.0}%",
@@ -471,7 +530,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
                 worst
                     .as_ref()
                     .map_or("n/a".into(), |(p, id)| format!("{p:.2} {id}")),
-                test_psnr.map_or(String::new(), |p| format!(" test {p:.2}")),
+                probe.map_or(String::new(), |p| p.summary()),
                 l.num_gaussians,
                 100.0 * dynamic
             );
@@ -490,8 +549,15 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
                 dynamic_fraction: dynamic,
                 wall_s: wall_before + step_ms.iter().sum::<f64>() / 1e3,
                 test_psnr,
+                test_dynamic_psnr: probe.and_then(|p| p.dynamic_psnr),
+                test_static_psnr: probe.and_then(|p| p.static_psnr),
+                motion_epe: probe.and_then(|p| p.epe),
+                motion_gt_px: probe.and_then(|p| p.gt_px),
+                motion_p50_px: probe.and_then(|p| p.p50_px),
+                motion_p99_px: probe.and_then(|p| p.p99_px),
                 worst_psnr: worst.as_ref().map(|w| w.0),
                 worst_view: worst.map(|w| w.1),
+                collapse: collapse.take(),
             };
             let text = serde_json::to_string(&line).expect("log line serialises");
             std::io::Write::write_all(&mut log_file, format!("{text}\n").as_bytes())
@@ -576,18 +642,22 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     metrics.mean_dynamic_fraction = (dyn_sum.1 > 0).then(|| dyn_sum.0 / dyn_sum.1 as f64);
     let log = crate::eval::run::read_log(&log_path)?;
     metrics.time_to_psnr = super::curve::time_to_psnr(&log);
+    metrics.collapses = log.iter().filter_map(|l| l.collapse.clone()).collect();
     crate::report::save_png(
         &crate::eval::run::training_plot(&log)?,
         &out.join("training.png"),
     )?;
     write_atomic(&out.join("metrics.json"), metrics.to_json().as_bytes())?;
     let fmt = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.4}"));
+    let fmt2 = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.2}"));
     println!(
-        "test PSNR {:.2} dB (initial {}), SSIM {:.4}, MMAP {}, DRC {}, {} Gaussians, {} ms/step; outputs in {}",
+        "test PSNR {:.2} dB (initial {}; dynamic {}, static {}), SSIM {:.4}, MMAP {}, DRC {}, {} Gaussians, {} ms/step; outputs in {}",
         metrics.psnr,
         metrics
             .initial_psnr
             .map_or("not measured: resumed".into(), |p| format!("{p:.2}")),
+        fmt2(metrics.dynamic_psnr),
+        fmt2(metrics.static_psnr),
         metrics.ssim,
         fmt(metrics.mmap),
         fmt(metrics.drc),

@@ -189,6 +189,9 @@ pub struct TrainConfig {
     /// `dispflow-vk signal`, which scores the scene motion at several stages of one run).
     #[serde(default)]
     pub keep_checkpoints: bool,
+    /// What a collapse (non-finite loss, or a lasting fall of the training PSNR) does.
+    #[serde(default)]
+    pub collapse: super::collapse::CollapseConfig,
 }
 
 /// The scene-motion signal's knobs (issue 16; each measured in its closing note). The flow
@@ -413,6 +416,7 @@ impl TrainConfig {
             motion_representation: MotionRepresentation::Displacement,
             motion_schedule: MotionSchedule::Ramp,
             keep_checkpoints: false,
+            collapse: super::collapse::CollapseConfig::default(),
         }
     }
 

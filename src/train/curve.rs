@@ -19,6 +19,50 @@ pub fn probe_frames(n: usize) -> Vec<usize> {
     (0..K).map(|i| i * (n - 1) / (K - 1)).collect()
 }
 
+/// What the periodic probe measured: means over its frames (each over the frames that have
+/// it; `None` where none does).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Probe {
+    pub psnr: f64,
+    pub dynamic_psnr: Option<f64>,
+    pub static_psnr: Option<f64>,
+    /// Displacement EPE inside the masks (pixels), the ground-truth flow's mean length there
+    /// (the EPE of a motionless model) and the Gaussians' projected-motion quantiles.
+    pub epe: Option<f64>,
+    pub gt_px: Option<f64>,
+    pub p50_px: Option<f64>,
+    pub p99_px: Option<f64>,
+}
+
+impl Probe {
+    pub fn of(frames: &[crate::eval::FrameEval], motion: &[crate::eval::epe::MotionProbe]) -> Self {
+        use crate::eval::report::mean_some as mean_of;
+        Probe {
+            psnr: crate::eval::report::mean(frames.iter().map(|f| f.psnr)),
+            dynamic_psnr: mean_of(frames.iter().map(|f| f.dynamic_psnr)),
+            static_psnr: mean_of(frames.iter().map(|f| f.static_psnr)),
+            epe: mean_of(motion.iter().map(|m| m.epe)),
+            gt_px: mean_of(motion.iter().map(|m| m.gt_len)),
+            p50_px: mean_of(motion.iter().map(|m| m.p50)),
+            p99_px: mean_of(motion.iter().map(|m| m.p99)),
+        }
+    }
+}
+
+impl Probe {
+    /// The progress line's part: ` test P (dyn D / static S) epe E/G px`.
+    pub fn summary(&self) -> String {
+        let mut s = format!(" test {:.2}", self.psnr);
+        if let (Some(d), Some(st)) = (self.dynamic_psnr, self.static_psnr) {
+            s += &format!(" (dyn {d:.2} / static {st:.2})");
+        }
+        if let (Some(e), Some(g)) = (self.epe, self.gt_px) {
+            s += &format!(" epe {e:.2}/{g:.2} px");
+        }
+        s
+    }
+}
+
 /// The worst training view seen since the last log line.
 #[derive(Clone, Debug, Default)]
 pub struct WorstView {
@@ -115,8 +159,7 @@ mod tests {
             dynamic_fraction: 1.0,
             wall_s,
             test_psnr,
-            worst_psnr: None,
-            worst_view: None,
+            ..LogLine::default()
         }
     }
 

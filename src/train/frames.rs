@@ -18,6 +18,10 @@ pub struct GpuFrame {
     pub prev_time: Option<f32>,
     /// Ground-truth scene flow [H·W] vec2 (training frames, oracle motion flow only).
     pub gt_flow: Option<Buffer>,
+    /// Test frames of scenes with ground-truth flow: the next time of any frame in the dataset
+    /// and the host copy of the flow towards it (`H×W×2` pixels under this frame's camera),
+    /// what the displacement EPE probe scores the model's motion against.
+    pub next_flow: Option<(f32, Vec<f32>)>,
 }
 
 /// The kernels' camera of a loaded (OpenCV, glam) camera; `near` is the projection's cut.
@@ -80,6 +84,15 @@ pub fn upload_frame(
         target: gpu.buffer_from(&format!("target {}", f.id), &rgba)?,
         mask,
         gt_flow: None,
+        next_flow: match (with_mask, &f.flow) {
+            (true, Some(flow)) if flow.len() == 2 * px => times
+                .iter()
+                .copied()
+                .filter(|&t| t > f.time)
+                .reduce(f32::min)
+                .map(|t| (t, flow.clone())),
+            _ => None,
+        },
         prev_time: times
             .iter()
             .copied()

@@ -5,9 +5,11 @@
 
 pub mod checkpoint;
 pub mod cli;
+pub mod collapse;
 pub mod config;
 pub mod curve;
 pub mod frames;
+pub mod guard;
 pub mod init;
 pub mod method;
 pub mod outputs;
@@ -80,6 +82,8 @@ pub struct Trainer<'g> {
     pub last_plan: Option<StepPlan>,
     /// Which of the dataset's points became the initial Gaussians.
     pub init_report: init::InitReport,
+    /// Multiplier of the deformation's learning rate (halved by each collapse rollback).
+    pub deform_lr_scale: f64,
 }
 
 impl<'g> Trainer<'g> {
@@ -144,6 +148,7 @@ impl<'g> Trainer<'g> {
             last_split: None,
             last_plan: None,
             init_report,
+            deform_lr_scale: 1.0,
         })
     }
 
@@ -170,7 +175,11 @@ impl<'g> Trainer<'g> {
 
     /// The plan of 1-based `iteration`.
     pub fn plan(&self, iteration: u32) -> StepPlan {
-        StepPlan::at(&self.cfg, &self.times, iteration)
+        let mut p = StepPlan::at(&self.cfg, &self.times, iteration);
+        if let Some((lr, k)) = p.lr.deform {
+            p.lr.deform = Some((lr * self.deform_lr_scale, k));
+        }
+        p
     }
 
     /// α_t at 1-based `iteration` (0 without the motion term).
@@ -332,15 +341,36 @@ impl<'g> Trainer<'g> {
     /// Mean test PSNR over the test frames `which` (render and photometric loss only: the
     /// cheap probe of the PSNR-vs-time curve).
     pub fn test_psnr(&mut self, which: &[usize]) -> Result<f64> {
+        Ok(self.probe(which, false)?.psnr)
+    }
+
+    /// The periodic probe over test frames `which`: mean PSNR and region PSNRs and, with
+    /// `motion` on frames with ground-truth flow, the displacement EPE and the Gaussians'
+    /// projected-motion quantiles (means over the frames that have each).
+    pub fn probe(&mut self, which: &[usize], motion: bool) -> Result<curve::Probe> {
         let view = self.view();
         let gpu = self.gpu;
         self.evaluator()?;
         let e = self.eval.as_mut().expect("built");
-        let mut sum = 0.0;
+        let mut frames = Vec::with_capacity(which.len());
+        let mut probes = Vec::new();
         for &i in which {
-            sum += e.photometric(gpu, &self.model, view, &self.val[i])?.psnr;
+            frames.push(e.photometric(gpu, &self.model, view, &self.val[i])?);
+            if motion {
+                probes.extend(e.motion_probe(gpu, &self.model, view, &self.val[i])?);
+            }
         }
-        Ok(sum / which.len().max(1) as f64)
+        Ok(curve::Probe::of(&frames, &probes))
+    }
+
+    /// The displacement EPE probe of test frame `i` (`None` without a mask and ground-truth
+    /// flow towards a next time).
+    pub fn motion_probe(&mut self, i: usize) -> Result<Option<crate::eval::epe::MotionProbe>> {
+        let view = self.view();
+        let gpu = self.gpu;
+        self.evaluator()?;
+        let e = self.eval.as_mut().expect("built");
+        e.motion_probe(gpu, &self.model, view, &self.val[i])
     }
 
     /// Evaluates test frame `i`.
@@ -404,6 +434,7 @@ impl<'g> Trainer<'g> {
     pub fn checkpoint(&self) -> Result<Checkpoint> {
         Ok(Checkpoint {
             iteration: self.iteration,
+            deform_lr_scale: (self.deform_lr_scale != 1.0).then_some(self.deform_lr_scale),
             model: self.model.checkpoint(self.gpu)?,
             densify_stats: match &self.passes {
                 Some(s) => s.densify.stats(self.gpu, self.n())?,
@@ -442,6 +473,7 @@ impl<'g> Trainer<'g> {
             .densify
             .restore_stats(gpu, &c.densify_stats)?;
         self.iteration = c.iteration;
+        self.deform_lr_scale = c.deform_lr_scale.unwrap_or(1.0);
         Ok(())
     }
 }

@@ -19,7 +19,7 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
 }
 
 /// One line of a run's `log.jsonl` (every `log_interval` iterations).
-#[derive(Debug, Serialize, serde::Deserialize)]
+#[derive(Debug, Default, Serialize, serde::Deserialize)]
 pub struct LogLine {
     pub iteration: u32,
     pub loss: f64,
@@ -39,11 +39,30 @@ pub struct LogLine {
     /// Mean test PSNR of the probe frames (every `test_interval` iterations, else absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_psnr: Option<f64>,
+    /// The probe's PSNR inside and outside the dilated motion masks (test frames with masks).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_dynamic_psnr: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_static_psnr: Option<f64>,
+    /// The probe's displacement EPE inside the masks, pixels (scenes with ground-truth flow),
+    /// next to the ground-truth flow's mean length there (a motionless model's EPE) and the
+    /// median and 99th percentile of the Gaussians' projected motion.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion_epe: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion_gt_px: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion_p50_px: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion_p99_px: Option<f64>,
     /// The worst training-view PSNR since the previous line, and that view's frame id.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub worst_psnr: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub worst_view: Option<String>,
+    /// A collapse confirmed since the previous line (and the rollback it caused).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub collapse: Option<super::collapse::CollapseEvent>,
 }
 
 fn one() -> f64 {

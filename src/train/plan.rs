@@ -17,8 +17,6 @@ pub struct FrameTimes {
     /// Frame indices sorted by time (ties by index) and each frame's rank in that order.
     by_time: Vec<usize>,
     rank: Vec<usize>,
-    /// 1 / distinct times: the scale of Deformable-3DGS's time noise.
-    time_interval: f32,
     time_noise: bool,
     /// 3DGS's camera extent (scales the position learning rate).
     pub extent: f32,
@@ -33,11 +31,7 @@ impl FrameTimes {
         for (r, &i) in by_time.iter().enumerate() {
             rank[i] = r;
         }
-        let mut distinct: Vec<u32> = times.iter().map(|t| t.to_bits()).collect();
-        distinct.sort_unstable();
-        distinct.dedup();
         FrameTimes {
-            time_interval: 1.0 / distinct.len().max(1) as f32,
             time_noise: match noise {
                 TimeNoise::Auto => !synthetic,
                 TimeNoise::On => true,
@@ -147,20 +141,12 @@ impl StepPlan {
         let deform_active = deform_on(cfg, it);
         let mut t1 = frames.times[frame];
         if frames.time_noise && deform_active {
-            // Deformable-3DGS AST: N(0,1) · (1 / frames) · a decaying factor.
             let (u1, u2) = (
                 hash_uniform(cfg.seed, it as u64, 1),
                 hash_uniform(cfg.seed, it as u64, 2),
             );
             let z = (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos();
-            let decay = ExpLr {
-                lr_init: 0.1,
-                lr_final: 1e-15,
-                lr_delay_steps: 0,
-                lr_delay_mult: 0.01,
-                max_steps: 20_000,
-            };
-            t1 += (z * frames.time_interval as f64 * decay.at(it as i64)) as f32;
+            t1 += (z * ast_scale(it, frames.times.len())) as f32;
         }
         let background = match cfg.background {
             Background::Black => [0.0; 3],
@@ -203,6 +189,23 @@ impl StepPlan {
             classify: split_due || (sparse && densify.is_some()),
         }
     }
+}
+
+/// The standard deviation of Deformable-3DGS's annealed time noise (AST) at 1-based
+/// iteration `it` with `frames` training frames, as its `train.py` computes it:
+/// `(1 / R) · β(it)`, where `R` is the number of the epoch's cameras not yet picked, counted
+/// before this pick (`len(viewpoint_stack)` before the pop: `frames` at an epoch's first
+/// pick, 1 at its last, so the noise grows through each epoch), and `β` is
+/// `get_linear_noise_func(0.1, 1e-15, max_steps = 20 000)`: a *linear* decay from 0.1 to
+/// 1e-15, clamped after 20 000 iterations. Epochs here are `frames` iterations long, as the
+/// frame order ([`frame_for_iteration`]) draws every frame once per epoch.
+pub fn ast_scale(it: u32, frames: usize) -> f64 {
+    let n = frames.max(1);
+    let picked = (it.max(1) as usize - 1) % n;
+    let remaining = (n - picked) as f64;
+    let f = (it as f64 / 20_000.0).clamp(0.0, 1.0);
+    let beta = 0.1 * (1.0 - f) + 1e-15 * f;
+    beta / remaining
 }
 
 /// The first iteration the motion term may run: `motion_start` with the schedule (TS), the
@@ -448,6 +451,53 @@ mod tests {
         assert_eq!(w.t1, on.times[w.frame], "no noise during the warm-up");
         let b = StepPlan::at(&c, &off, 30);
         assert_eq!(b.t1, off.times[b.frame], "synthetic scenes: auto = off");
+    }
+
+    #[test]
+    fn ast_follows_the_official_formula() {
+        // train.py: total_frame = len(viewpoint_stack) before the pop; time_interval =
+        // 1 / total_frame; smooth_term = get_linear_noise_func(0.1, 1e-15, 0, 0.01, 20000).
+        let official = |it: u32, remaining: usize| {
+            let t = (it as f64 / 20000.0).clamp(0.0, 1.0);
+            (0.1 * (1.0 - t) + 1e-15 * t) * (1.0 / remaining as f64)
+        };
+        let n = 50;
+        for (it, remaining) in [(1, 50), (2, 49), (50, 1), (51, 50), (600, 1), (3000, 1)] {
+            let (a, b) = (ast_scale(it, n), official(it, remaining));
+            assert!((a - b).abs() <= 1e-15 * b.max(1e-15), "it {it}: {a} vs {b}");
+        }
+        assert!(
+            (ast_scale(600, 50) - 0.097).abs() < 1e-12,
+            "linear, not exponential"
+        );
+        assert!(
+            (ast_scale(10_000, 1) - 0.05).abs() < 1e-12,
+            "half way: half of 0.1"
+        );
+        assert!(ast_scale(25_000, 1) < 1e-14, "clamped at 20 000");
+        // The noise grows through an epoch: 1/N at its first pick, 1 at its last.
+        assert!(ast_scale(1, n) * 49.0 < ast_scale(50, n));
+        // The plan adds N(0,1)·ast_scale to the frame's time on real captures.
+        let mut c = cfg();
+        c.warm_up = 0;
+        let f = FrameTimes::new(
+            (0..n).map(|k| k as f32 / 49.0).collect(),
+            TimeNoise::On,
+            false,
+            1.0,
+        );
+        let z: Vec<f64> = (1..=4000)
+            .map(|it| {
+                let p = StepPlan::at(&c, &f, it);
+                (p.t1 - f.times[p.frame]) as f64 / ast_scale(it, n)
+            })
+            .collect();
+        let mean = z.iter().sum::<f64>() / z.len() as f64;
+        let var = z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / z.len() as f64;
+        assert!(
+            mean.abs() < 0.1 && (var - 1.0).abs() < 0.1,
+            "N(0,1): {mean} {var}"
+        );
     }
 
     #[test]

@@ -1,0 +1,262 @@
+//! A collapse is never silent: the watch reads every step's training loss and PSNR and says
+//! when the loss turns non-finite or the training PSNR falls by `drop_db` below the best it
+//! reached and stays down for a window of steps (as a deformation that starts with too high a
+//! rate does: Deformable-3DGS's issues #29 and #34 report the same). Pure: no GPU, unit-tested.
+//!
+//! The PSNR compared is a sliding mean over `window` steps: each step trains a different view,
+//! whose PSNR alone swings by several dB; the mean over a window of views does not. An opacity
+//! reset drops the PSNR on purpose, so the reference restarts after one.
+
+use serde::{Deserialize, Serialize};
+
+/// What the run does when it collapses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum OnCollapse {
+    /// Say so (progress line, `log.jsonl`, `metrics.json`) and go on; a non-finite loss stops
+    /// the run with an error.
+    #[default]
+    Warn,
+    /// Restore the last checkpoint taken before the fall and go on with the deformation's
+    /// learning rate halved (logged); at most [`MAX_ROLLBACKS`] times.
+    Rollback,
+}
+
+/// Rollbacks a run may make before it gives up with an error.
+pub const MAX_ROLLBACKS: u32 = 8;
+
+/// The collapse watch's settings (config `[collapse]`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CollapseConfig {
+    pub on_collapse: OnCollapse,
+    /// A fall of the windowed training PSNR below its best by more than this many dB that lasts
+    /// a whole window is a collapse.
+    pub drop_db: f32,
+    /// Steps in the sliding window; 0 = `iterations / 40` clamped to 10..=100.
+    pub window: u32,
+}
+
+impl Default for CollapseConfig {
+    fn default() -> Self {
+        CollapseConfig {
+            on_collapse: OnCollapse::Warn,
+            drop_db: 2.0,
+            window: 0,
+        }
+    }
+}
+
+impl CollapseConfig {
+    /// The window in steps for a run of `iterations`.
+    pub fn window_for(&self, iterations: u32) -> usize {
+        if self.window > 0 {
+            self.window as usize
+        } else {
+            (iterations / 40).clamp(10, 100) as usize
+        }
+    }
+}
+
+/// A collapse as reported in `log.jsonl` and `metrics.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CollapseEvent {
+    /// The step at which the fall was confirmed (the loss turned non-finite, or the window
+    /// below the best closed).
+    pub iteration: u32,
+    /// `psnr_drop` or `non_finite_loss`.
+    pub kind: String,
+    /// The best windowed training PSNR before the fall and the windowed PSNR at `iteration`
+    /// (dB; the last finite one for a non-finite loss).
+    pub before_db: f64,
+    pub after_db: f64,
+    /// With `--on-collapse rollback`: the iteration restored and the deformation rate's
+    /// multiplier from then on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rolled_back_to: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deform_lr_scale: Option<f64>,
+}
+
+/// The watch over a run's training steps.
+#[derive(Clone, Debug)]
+pub struct CollapseWatch {
+    window: usize,
+    drop_db: f64,
+    /// PSNRs of the last `window` steps.
+    recent: std::collections::VecDeque<f64>,
+    best: Option<f64>,
+    /// Consecutive steps whose windowed PSNR was below `best − drop_db`.
+    below: usize,
+}
+
+impl CollapseWatch {
+    pub fn new(cfg: &CollapseConfig, iterations: u32) -> Self {
+        CollapseWatch {
+            window: cfg.window_for(iterations),
+            drop_db: cfg.drop_db as f64,
+            recent: Default::default(),
+            best: None,
+            below: 0,
+        }
+    }
+
+    /// The windowed PSNR (mean of the last `window` steps) once a window is full.
+    pub fn level(&self) -> Option<f64> {
+        (self.recent.len() == self.window)
+            .then(|| self.recent.iter().sum::<f64>() / self.window as f64)
+    }
+
+    /// The best windowed PSNR so far (since the last restart).
+    pub fn best(&self) -> Option<f64> {
+        self.best
+    }
+
+    /// The run is at its level: no fall under way (a checkpoint now is a good one to return
+    /// to). False until the first window is full.
+    pub fn healthy(&self) -> bool {
+        match (self.level(), self.best) {
+            (Some(l), Some(b)) => self.below == 0 && l >= b - 0.5 * self.drop_db,
+            _ => false,
+        }
+    }
+
+    /// Forgets the history (after an opacity reset or a rollback): the next full window is
+    /// the new reference.
+    pub fn restart(&mut self) {
+        self.recent.clear();
+        self.best = None;
+        self.below = 0;
+    }
+
+    /// Feeds step `iteration`'s loss and training PSNR; returns the collapse it confirms.
+    pub fn see(&mut self, iteration: u32, loss: f64, psnr: f64) -> Option<CollapseEvent> {
+        if !loss.is_finite() || psnr.is_nan() {
+            let last = self.level().or(self.best).unwrap_or(f64::NAN);
+            return Some(CollapseEvent {
+                iteration,
+                kind: "non_finite_loss".into(),
+                before_db: self.best.unwrap_or(last),
+                after_db: last,
+                rolled_back_to: None,
+                deform_lr_scale: None,
+            });
+        }
+        // A perfect view (∞ dB) would pin the mean at ∞: cap it far above any real PSNR.
+        self.recent.push_back(psnr.min(100.0));
+        if self.recent.len() > self.window {
+            self.recent.pop_front();
+        }
+        let level = self.level()?;
+        let best = *self.best.get_or_insert(level);
+        if level >= best {
+            self.best = Some(level);
+            self.below = 0;
+            return None;
+        }
+        if level < best - self.drop_db {
+            self.below += 1;
+        } else {
+            self.below = 0;
+        }
+        if self.below < self.window {
+            return None;
+        }
+        // Reported once: the fallen level is the new reference.
+        self.below = 0;
+        self.best = Some(level);
+        Some(CollapseEvent {
+            iteration,
+            kind: "psnr_drop".into(),
+            before_db: best,
+            after_db: level,
+            rolled_back_to: None,
+            deform_lr_scale: None,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn watch(window: u32) -> CollapseWatch {
+        let cfg = CollapseConfig {
+            window,
+            ..CollapseConfig::default()
+        };
+        CollapseWatch::new(&cfg, 1000)
+    }
+
+    /// A view-to-view swing of ±2 dB around `level`.
+    fn psnr(it: u32, level: f64) -> f64 {
+        level + if it % 2 == 0 { 2.0 } else { -2.0 }
+    }
+
+    #[test]
+    fn a_lasting_fall_is_reported_once_with_its_levels() {
+        let mut w = watch(10);
+        let mut events = Vec::new();
+        for it in 1..=300u32 {
+            let level = if it <= 100 {
+                12.0 + it as f64 * 0.05
+            } else {
+                14.5
+            };
+            events.extend(w.see(it, 0.1, psnr(it, level)));
+        }
+        assert_eq!(events.len(), 1, "{events:?}");
+        let e = &events[0];
+        assert_eq!(e.kind, "psnr_drop");
+        assert!((e.before_db - 16.775).abs() < 0.3, "{e:?}");
+        assert!((e.after_db - 14.5).abs() < 0.3, "{e:?}");
+        // Confirmed one window after the windowed mean fell below best − 2 dB.
+        assert!((100..=125).contains(&e.iteration), "{e:?}");
+    }
+
+    #[test]
+    fn noise_a_short_dip_and_a_slow_rise_are_not_collapses() {
+        let mut w = watch(10);
+        for it in 1..=400u32 {
+            // A 5-step dip of 6 dB moves the 10-step mean by 3 dB for a few steps only.
+            let dip = if (200..205).contains(&it) { 6.0 } else { 0.0 };
+            let level = 12.0 + it as f64 * 0.02 - dip;
+            assert_eq!(w.see(it, 0.1, psnr(it, level)), None, "iteration {it}");
+        }
+        assert!(w.healthy());
+    }
+
+    #[test]
+    fn non_finite_loss_is_reported_at_once() {
+        let mut w = watch(10);
+        for it in 1..=20 {
+            assert!(w.see(it, 0.1, 18.0).is_none());
+        }
+        let e = w.see(21, f64::NAN, f64::NAN).expect("reported");
+        assert_eq!(
+            (e.kind.as_str(), e.iteration, e.before_db, e.after_db),
+            ("non_finite_loss", 21, 18.0, 18.0)
+        );
+        assert!(w.see(22, f64::INFINITY, 10.0).is_some());
+    }
+
+    #[test]
+    fn restart_forgets_the_reference_and_health_needs_a_full_window() {
+        let mut w = watch(10);
+        assert!(!w.healthy());
+        for it in 1..=30 {
+            w.see(it, 0.1, 20.0);
+        }
+        assert!(w.healthy());
+        w.restart();
+        assert!(!w.healthy() && w.best().is_none());
+        // After an opacity reset the PSNR restarts low: no collapse against the old best.
+        for it in 31..=100 {
+            assert!(w.see(it, 0.1, 12.0).is_none());
+        }
+        assert_eq!(w.best(), Some(12.0));
+        assert_eq!(CollapseConfig::default().window_for(600), 15);
+        assert_eq!(CollapseConfig::default().window_for(200), 10);
+        assert_eq!(CollapseConfig::default().window_for(20_000), 100);
+    }
+}
