@@ -246,12 +246,19 @@ impl MlpLayout {
     /// `[−1/√fan_in, 1/√fan_in)`, from a PCG stream seeded by `seed` (reproducible). Padding
     /// between tensors is zero.
     pub fn init_params(&self, seed: u64) -> Vec<f32> {
+        self.init_params_gain(seed, 1.0)
+    }
+
+    /// [`Self::init_params`] with every weight bound (not the biases') scaled by `gain`:
+    /// `gain = √6` is He's uniform init for ReLU layers, which keeps the activations' scale
+    /// through the trunk where PyTorch's default shrinks it ≈ 2.4× per layer.
+    pub fn init_params_gain(&self, seed: u64, gain: f32) -> Vec<f32> {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         let mut p = vec![0.0f32; self.total];
         for l in &self.linears {
             let bound = 1.0 / (l.fan_in as f32).sqrt();
             for v in &mut p[l.w_off..l.w_off + l.fan_in * l.fan_out] {
-                *v = rng.gen_range(-bound..bound);
+                *v = gain * rng.gen_range(-bound..bound);
             }
             for v in &mut p[l.b_off..l.b_off + l.fan_out] {
                 *v = rng.gen_range(-bound..bound);

@@ -155,8 +155,20 @@ impl DeformState {
     /// Gaussian by a random head (PyTorch-init displacements ~0.1–0.5 scene units, and ds ≫
     /// exp(s) inflates every Gaussian). The head still gets gradients at once.
     pub fn new(gpu: &Gpu, cfg: MlpConfig, seed: u64, zero_head: bool) -> Result<Self> {
+        Self::with_gain(gpu, cfg, seed, zero_head, 1.0)
+    }
+
+    /// [`Self::new`] with the weights' init bounds scaled by `gain` (see
+    /// [`MlpLayout::init_params_gain`]).
+    pub fn with_gain(
+        gpu: &Gpu,
+        cfg: MlpConfig,
+        seed: u64,
+        zero_head: bool,
+        gain: f32,
+    ) -> Result<Self> {
         let layout = MlpLayout::new(&cfg)?;
-        let mut init = layout.init_params(seed);
+        let mut init = layout.init_params_gain(seed, gain);
         if zero_head {
             let h = layout.head();
             init[h.w_off..h.w_off + h.fan_in * h.fan_out].fill(0.0);

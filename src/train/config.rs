@@ -66,6 +66,10 @@ impl LearningRates {
     }
 }
 
+fn one_f32() -> f32 {
+    1.0
+}
+
 /// Adaptive density control (3DGS).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -126,6 +130,11 @@ pub struct TrainConfig {
     /// Start the deformation head at zero (D = 0 exactly when the warm-up ends) instead of
     /// PyTorch's random init, which displaces and inflates every Gaussian at once.
     pub zero_deform_head: bool,
+    /// Scale of the MLP's initial weight bounds: 1 = PyTorch's default `nn.Linear` init (the
+    /// paper's), √6 ≈ 2.449 = He's uniform init for ReLU (the trunk's features keep their
+    /// scale instead of shrinking ≈ 2.4× per layer, so a zero head learns fast).
+    #[serde(default = "one_f32")]
+    pub mlp_init_gain: f32,
     pub lambda_ssim: f32,
     pub background: Background,
     /// Time noise (AST) of Deformable-3DGS: "auto" (on for real captures, off for synthetic
@@ -192,6 +201,33 @@ pub struct TrainConfig {
     /// What a collapse (non-finite loss, or a lasting fall of the training PSNR) does.
     #[serde(default)]
     pub collapse: super::collapse::CollapseConfig,
+    /// Time curriculum: train on a window of frames around the middle of the sequence that
+    /// widens to all frames (see [`CurriculumConfig`]).
+    #[serde(default)]
+    pub curriculum: CurriculumConfig,
+}
+
+/// A time curriculum: the training frames are drawn from the frames whose time ranks lie in a
+/// window centred on the sequence's middle, covering `start` of the frames at the first
+/// iteration and widening linearly to all of them at `until` × iterations. The canonical
+/// Gaussians then fit one instant sharply instead of averaging a moving object along its path
+/// (a smear the photometric gradient cannot pull back), and the deformation learns the motion
+/// outwards from that instant a little at a time, where each new time needs a displacement
+/// of a fraction of the object's size. `start = 1`: off (every frame from the start).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CurriculumConfig {
+    pub start: f32,
+    pub until: f32,
+}
+
+impl Default for CurriculumConfig {
+    fn default() -> Self {
+        CurriculumConfig {
+            start: 1.0,
+            until: 0.0,
+        }
+    }
 }
 
 /// The scene-motion signal's knobs (issue 16; each measured in its closing note). The flow
@@ -393,6 +429,7 @@ impl TrainConfig {
             mlp_depth: 8,
             warm_up: 3000,
             zero_deform_head: true,
+            mlp_init_gain: 1.0,
             lambda_ssim: 0.2,
             background: Background::Black,
             time_noise: TimeNoise::Auto,
@@ -417,6 +454,7 @@ impl TrainConfig {
             motion_schedule: MotionSchedule::Ramp,
             keep_checkpoints: false,
             collapse: super::collapse::CollapseConfig::default(),
+            curriculum: CurriculumConfig::default(),
         }
     }
 

@@ -107,11 +107,12 @@ impl<'g> Trainer<'g> {
         let budget = cfg.densify.budget;
         let model = Model {
             gaussians: GaussianState::new(gpu, budget, cfg.sh_degree, &init)?,
-            deform: DeformState::new(
+            deform: DeformState::with_gain(
                 gpu,
                 mlp_config_for(synthetic, cfg.mlp_depth, cfg.mlp_width),
                 cfg.seed,
                 cfg.zero_deform_head,
+                cfg.mlp_init_gain,
             )?,
             dynamic: DynamicSet::new(gpu, budget)?,
         };

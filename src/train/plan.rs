@@ -44,6 +44,19 @@ impl FrameTimes {
         }
     }
 
+    /// The training frame of 1-based iteration `it`: an epoch-wise shuffle of every frame,
+    /// or, while the time curriculum's window is narrower than the sequence, of the frames
+    /// whose time ranks lie in the window (centred on the middle rank).
+    pub fn pick(&self, cfg: &TrainConfig, it: u32) -> usize {
+        let n = self.times.len();
+        let span = curriculum_span(cfg, it, n);
+        if span >= n {
+            return frame_for_iteration(cfg.seed, it, n);
+        }
+        let lo = (n - span) / 2;
+        self.by_time[lo + frame_for_iteration(cfg.seed, it, span)]
+    }
+
     /// The temporal neighbour of frame `fi`: `gap` frames later in time (earlier at the end).
     pub fn pair(&self, fi: usize, gap: u32) -> usize {
         let (r, n, gap) = (self.rank[fi], self.by_time.len(), gap.max(1) as usize);
@@ -137,7 +150,7 @@ pub struct StepPlan {
 impl StepPlan {
     pub fn at(cfg: &TrainConfig, frames: &FrameTimes, iteration: u32) -> StepPlan {
         let it = iteration.max(1);
-        let frame = frame_for_iteration(cfg.seed, it, frames.times.len());
+        let frame = frames.pick(cfg, it);
         let deform_active = deform_on(cfg, it);
         let mut t1 = frames.times[frame];
         if frames.time_noise && deform_active {
@@ -206,6 +219,20 @@ pub fn ast_scale(it: u32, frames: usize) -> f64 {
     let f = (it as f64 / 20_000.0).clamp(0.0, 1.0);
     let beta = 0.1 * (1.0 - f) + 1e-15 * f;
     beta / remaining
+}
+
+/// Frames the time curriculum allows at 1-based iteration `it` (of `n`; `n` when off or
+/// done): `start · n` at the first iteration, growing linearly to `n` at `until · iterations`,
+/// at least 2 (a single instant has no motion to learn).
+pub fn curriculum_span(cfg: &TrainConfig, it: u32, n: usize) -> usize {
+    let c = &cfg.curriculum;
+    if c.start >= 1.0 || n <= 2 {
+        return n;
+    }
+    let end = (c.until.max(0.0) as f64 * cfg.iterations as f64).max(1.0);
+    let f = ((it.max(1) - 1) as f64 / end).min(1.0);
+    let frac = c.start.max(0.0) as f64 + (1.0 - c.start.max(0.0) as f64) * f;
+    ((frac * n as f64).ceil() as usize).clamp(2, n)
 }
 
 /// The first iteration the motion term may run: `motion_start` with the schedule (TS), the
@@ -322,6 +349,7 @@ pub fn frame_for_iteration(seed: u64, iteration: u32, frames: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::train::config::CurriculumConfig;
 
     fn cfg() -> TrainConfig {
         let mut c = TrainConfig::fast();
@@ -498,6 +526,49 @@ mod tests {
             mean.abs() < 0.1 && (var - 1.0).abs() < 0.1,
             "N(0,1): {mean} {var}"
         );
+    }
+
+    #[test]
+    fn curriculum_widens_from_the_middle_to_every_frame() {
+        let mut c = cfg();
+        let n = 21;
+        let f = FrameTimes::new(
+            (0..n).map(|k| (n - 1 - k) as f32 / 20.0).collect(),
+            TimeNoise::Off,
+            true,
+            1.0,
+        );
+        assert!(
+            (1..=100)
+                .all(|it| StepPlan::at(&c, &f, it).frame == frame_for_iteration(c.seed, it, n)),
+            "off by default"
+        );
+        c.curriculum = CurriculumConfig {
+            start: 0.2,
+            until: 0.5,
+        };
+        assert_eq!(curriculum_span(&c, 1, n), 5);
+        assert_eq!(curriculum_span(&c, 26, n), 13, "half way to iteration 50");
+        assert_eq!(curriculum_span(&c, 51, n), n);
+        assert_eq!(curriculum_span(&c, 100, n), n);
+        let spread = |its: std::ops::RangeInclusive<u32>| {
+            let ts: Vec<f32> = its
+                .map(|it| f.times[StepPlan::at(&c, &f, it).frame])
+                .collect();
+            let lo = ts.iter().copied().fold(f32::MAX, f32::min);
+            let hi = ts.iter().copied().fold(f32::MIN, f32::max);
+            (lo, hi)
+        };
+        // The first iterations see the 5 middle times only (ranks 8..=12: t 0.4..0.6).
+        let (lo, hi) = spread(1..=3);
+        assert!(lo >= 0.4 - 1e-6 && hi <= 0.6 + 1e-6, "{lo} {hi}");
+        let (lo, hi) = spread(51..=100);
+        assert!(
+            lo == 0.0 && hi == 1.0,
+            "all frames once the window is full: {lo} {hi}"
+        );
+        c.curriculum.start = 0.0;
+        assert_eq!(curriculum_span(&c, 1, n), 2, "at least two instants");
     }
 
     #[test]

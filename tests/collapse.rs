@@ -1,0 +1,125 @@
+//! A collapse is never silent: a run driven to collapse on purpose (a deformation rate 2500×
+//! the fast preset's, so the deformation throws the Gaussians away as it starts) is reported
+//! with its iteration and levels, by the trainer's guard and by `dispflow-vk train` in
+//! `log.jsonl` and `metrics.json`; with rollback it returns to an earlier state with the
+//! deformation rate halved and ends above the level it had collapsed to.
+
+mod train_common;
+
+use dispflow_vk::testing;
+use dispflow_vk::train::collapse::{CollapseEvent, OnCollapse};
+use dispflow_vk::train::config::TrainConfig;
+use dispflow_vk::train::guard::CollapseGuard;
+use dispflow_vk::train::Trainer;
+use train_common::{tiny_config, tiny_dataset, tiny_scene};
+
+/// The tiny scene's configuration with the deformation starting at 100 of 240 iterations at
+/// an absurd rate (2.0, decaying to 0.2).
+fn absurd(action: OnCollapse) -> TrainConfig {
+    let mut c = tiny_config(240);
+    c.warm_up = 100;
+    c.densify.until = 0;
+    c.lr.deform_init = 2.0;
+    c.lr.deform_final = 0.2;
+    c.collapse.on_collapse = action;
+    c
+}
+
+/// Trains `cfg` under the guard; returns the events and the windowed training PSNR at the
+/// end (mean of the last 20 steps).
+fn run(cfg: &TrainConfig) -> (Vec<CollapseEvent>, f64) {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let mut tr = Trainer::new(&gpu, cfg, &ds).unwrap();
+    let mut guard = CollapseGuard::new(&tr).unwrap();
+    let (mut events, mut last) = (Vec::new(), Vec::new());
+    while tr.iteration < cfg.iterations {
+        tr.step(false, false).unwrap();
+        let done = tr.last_plan.unwrap();
+        let (v, _) = tr.last_loss().unwrap();
+        last.push(v.psnr);
+        match guard.after_step(&mut tr, &done, v.loss, v.psnr).unwrap() {
+            Some(e) => {
+                let stop = e.kind == "non_finite_loss" && e.rolled_back_to.is_none();
+                events.push(e);
+                if stop {
+                    break;
+                }
+            }
+            None => {}
+        }
+    }
+    let tail = &last[last.len().saturating_sub(20)..];
+    (events, tail.iter().sum::<f64>() / tail.len() as f64)
+}
+
+#[test]
+fn a_collapse_is_reported_and_rollback_recovers_from_it() {
+    let (warned, end_warn) = run(&absurd(OnCollapse::Warn));
+    eprintln!("warn: {warned:?}, final windowed PSNR {end_warn:.2}");
+    let first = warned.first().expect("the absurd rate collapses the run");
+    assert!(
+        first.iteration > 100,
+        "not before the deformation starts: {first:?}"
+    );
+    if first.kind == "psnr_drop" {
+        assert!(first.after_db < first.before_db - 2.0, "{first:?}");
+    }
+    assert!(warned.iter().all(|e| e.rolled_back_to.is_none()));
+
+    let (rolled, end) = run(&absurd(OnCollapse::Rollback));
+    eprintln!("rollback: {rolled:?}, final windowed PSNR {end:.2}");
+    let r = rolled.first().expect("the same collapse");
+    let to = r.rolled_back_to.expect("rolled back");
+    assert!(to < r.iteration, "{r:?}");
+    assert_eq!(r.deform_lr_scale, Some(0.5));
+    // Each further rollback halves again.
+    for (k, e) in rolled.iter().enumerate() {
+        assert_eq!(e.deform_lr_scale, Some(0.5f64.powi(k as i32 + 1)), "{e:?}");
+    }
+    assert!(
+        end.is_finite() && end > r.after_db + 1.0,
+        "recovered above the collapse level {:.2} dB: ends at {end:.2}",
+        r.after_db
+    );
+}
+
+#[test]
+fn train_writes_the_collapse_to_its_log_and_metrics() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(tmp.path());
+    let cfg = absurd(OnCollapse::Warn);
+    let toml = tmp.path().join("absurd.toml");
+    std::fs::write(&toml, cfg.to_toml()).unwrap();
+    let out = tmp.path().join("run");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dispflow-vk"))
+        .env("HOME", tmp.path().join("home"))
+        .env("XDG_CACHE_HOME", tmp.path().join("cache"))
+        .args(["train", "--preset", "fast", "--config"])
+        .arg(&toml)
+        .arg("--data")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("collapse at iteration"), "{stderr}");
+    let log = std::fs::read_to_string(out.join("log.jsonl")).unwrap();
+    assert!(log.contains("\"collapse\""), "log.jsonl names the collapse");
+    if o.status.success() {
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
+                .unwrap();
+        let c = m["collapses"]
+            .as_array()
+            .expect("metrics.json lists collapses");
+        assert!(!c.is_empty());
+        assert!(c[0]["iteration"].as_u64().unwrap() > 100);
+        assert!(c[0]["before_db"].as_f64().unwrap() > c[0]["after_db"].as_f64().unwrap());
+    } else {
+        // Only a non-finite loss stops a `warn` run, and it says so.
+        assert!(stderr.contains("not finite"), "{stderr}");
+    }
+}
