@@ -39,15 +39,12 @@ fn run(cfg: &TrainConfig) -> (Vec<CollapseEvent>, f64) {
         let done = tr.last_plan.unwrap();
         let (v, _) = tr.last_loss().unwrap();
         last.push(v.psnr);
-        match guard.after_step(&mut tr, &done, v.loss, v.psnr).unwrap() {
-            Some(e) => {
-                let stop = e.kind == "non_finite_loss" && e.rolled_back_to.is_none();
-                events.push(e);
-                if stop {
-                    break;
-                }
+        if let Some(e) = guard.after_step(&mut tr, &done, v.loss, v.psnr).unwrap() {
+            let stop = e.kind == "non_finite_loss" && e.rolled_back_to.is_none();
+            events.push(e);
+            if stop {
+                break;
             }
-            None => {}
         }
     }
     let tail = &last[last.len().saturating_sub(20)..];

@@ -20,7 +20,9 @@ pub fn project(cam: &Camera, p: [f32; 3]) -> Option<[f64; 2]> {
                 .map(|j| cam.rot[i][j] as f64 * p[j] as f64)
                 .sum::<f64>();
     }
-    if !(c[2] > cam.near as f64) || !c.iter().all(|v| v.is_finite()) {
+    if c[2].partial_cmp(&(cam.near as f64)) != Some(std::cmp::Ordering::Greater)
+        || !c.iter().all(|v| v.is_finite())
+    {
         return None;
     }
     Some([

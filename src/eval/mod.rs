@@ -505,7 +505,8 @@ impl Evaluator {
             None => (None, None),
         };
         let has_mask = mask.is_some_and(|m| m.1.iter().any(|&v| v != 0));
-        let host = |want: bool| -> Result<(Vec<[f32; 4]>, Vec<[f32; 4]>)> {
+        type Pair = (Vec<[f32; 4]>, Vec<[f32; 4]>);
+        let host = |want: bool| -> Result<Pair> {
             if !want {
                 return Ok((Vec::new(), Vec::new()));
             }

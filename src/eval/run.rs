@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::model::deform::MlpLayout;
 use crate::model::dynamic::SplitSnapshot;
 use crate::model::gaussians::HostGaussians;
-use crate::model::state::{gaussian_blobs, mlp_config_for};
+use crate::model::state::{gaussian_blobs, mlp_config_of};
 use crate::report::{self, Plot, Series, PALETTE};
 use crate::train::checkpoint::{read_ply, write_atomic};
 use crate::train::cli::{load_options, LogLine};
@@ -149,7 +149,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     })?;
     // The MLP's size follows from config.toml and the dataset's kind (its time encoding).
     let synthetic = data::detect_format(&data_dir)? == data::Format::Blender;
-    let floats = MlpLayout::new(&mlp_config_for(synthetic, cfg.mlp_depth, cfg.mlp_width))?.total;
+    let floats = MlpLayout::new(&mlp_config_of(synthetic, &cfg))?.total;
     if bytes.len() != floats * 4 {
         return Err(invalid(
             &weights,

@@ -204,6 +204,28 @@ impl DeformState {
 /// The MLP configuration of a run: Deformable-3DGS's encodings for the dataset's kind
 /// (synthetic scenes: γ(t) with L=6 through a time net; real captures: γ(t) with L=10) at the
 /// configured depth and width, the skip at the middle layer.
+/// The run's MLP: [`mlp_config_for`] with the positional encodings' frequency counts
+/// overridden where the run's configuration sets them (0 = the paper's for the dataset).
+pub fn mlp_config_of(synthetic: bool, cfg: &crate::train::config::TrainConfig) -> MlpConfig {
+    let mut m = mlp_config_for(synthetic, cfg.mlp_depth, cfg.mlp_width);
+    if cfg.mlp_x_freqs > 0 {
+        m.x_freqs = cfg.mlp_x_freqs;
+    }
+    if cfg.mlp_t_freqs > 0 {
+        m.time = match m.time {
+            TimeEncoding::Direct { .. } => TimeEncoding::Direct {
+                freqs: cfg.mlp_t_freqs,
+            },
+            TimeEncoding::TimeNet { hidden, out, .. } => TimeEncoding::TimeNet {
+                freqs: cfg.mlp_t_freqs,
+                hidden,
+                out,
+            },
+        };
+    }
+    m
+}
+
 pub fn mlp_config_for(synthetic: bool, depth: u32, width: u32) -> MlpConfig {
     let base = if synthetic {
         MlpConfig::synthetic()

@@ -164,7 +164,7 @@ pub struct TrainArgs {
     #[arg(long)]
     pub flow_level: Option<u32>,
     /// What a collapse does (a non-finite loss, or the windowed training PSNR falling by
-    /// `collapse.drop_db` (2 dB) below its best for a window): warn (say so in the progress
+    /// `collapse.drop_db` (2 dB) below its best for three windows): warn (say so in the progress
     /// line, log.jsonl and metrics.json; a non-finite loss stops the run) or rollback
     /// (restore the last good in-memory checkpoint and go on with the deformation rate
     /// halved, at most 8 times) [default: warn].

@@ -1,6 +1,6 @@
 //! A collapse is never silent: the watch reads every step's training loss and PSNR and says
 //! when the loss turns non-finite or the training PSNR falls by `drop_db` below the best it
-//! reached and stays down for a window of steps (as a deformation that starts with too high a
+//! reached and stays down for three windows of steps (as a deformation that starts with too high a
 //! rate does: Deformable-3DGS's issues #29 and #34 report the same). Pure: no GPU, unit-tested.
 //!
 //! The PSNR compared is a sliding mean over `window` steps: each step trains a different view,
@@ -22,6 +22,11 @@ pub enum OnCollapse {
     Rollback,
 }
 
+/// Windows a fall must last to be a collapse: a densification's split and clone can cost a
+/// few dB for a window or two (measured: 19.0 → 16.2 dB for ~30 steps after the built-in
+/// scene's densification at iteration 200 of 600), which the run recovers from by itself.
+pub const CONFIRM_WINDOWS: usize = 3;
+
 /// Rollbacks a run may make before it gives up with an error.
 pub const MAX_ROLLBACKS: u32 = 8;
 
@@ -31,7 +36,7 @@ pub const MAX_ROLLBACKS: u32 = 8;
 pub struct CollapseConfig {
     pub on_collapse: OnCollapse,
     /// A fall of the windowed training PSNR below its best by more than this many dB that lasts
-    /// a whole window is a collapse.
+    /// [`CONFIRM_WINDOWS`] windows is a collapse.
     pub drop_db: f32,
     /// Steps in the sliding window; 0 = `iterations / 40` clamped to 10..=100.
     pub window: u32,
@@ -159,7 +164,7 @@ impl CollapseWatch {
         } else {
             self.below = 0;
         }
-        if self.below < self.window {
+        if self.below < CONFIRM_WINDOWS * self.window {
             return None;
         }
         // Reported once: the fallen level is the new reference.
@@ -210,16 +215,23 @@ mod tests {
         assert_eq!(e.kind, "psnr_drop");
         assert!((e.before_db - 16.775).abs() < 0.3, "{e:?}");
         assert!((e.after_db - 14.5).abs() < 0.3, "{e:?}");
-        // Confirmed one window after the windowed mean fell below best − 2 dB.
-        assert!((100..=125).contains(&e.iteration), "{e:?}");
+        // Confirmed three windows after the windowed mean fell below best − 2 dB.
+        assert!((130..=145).contains(&e.iteration), "{e:?}");
     }
 
     #[test]
     fn noise_a_short_dip_and_a_slow_rise_are_not_collapses() {
         let mut w = watch(10);
         for it in 1..=400u32 {
-            // A 5-step dip of 6 dB moves the 10-step mean by 3 dB for a few steps only.
-            let dip = if (200..205).contains(&it) { 6.0 } else { 0.0 };
+            // A 5-step dip of 6 dB moves the 10-step mean by 3 dB for a few steps only, and a
+            // 3 dB dip for 20 steps (a densification) is over before three windows.
+            let dip = if (200..205).contains(&it) {
+                6.0
+            } else if (300..320).contains(&it) {
+                3.0
+            } else {
+                0.0
+            };
             let level = 12.0 + it as f64 * 0.02 - dip;
             assert_eq!(w.see(it, 0.1, psnr(it, level)), None, "iteration {it}");
         }

@@ -135,6 +135,13 @@ pub struct TrainConfig {
     /// scale instead of shrinking ≈ 2.4× per layer, so a zero head learns fast).
     #[serde(default = "one_f32")]
     pub mlp_init_gain: f32,
+    /// Frequencies of the MLP's positional encodings of x and of t; 0 = the paper's (x: 10;
+    /// t: 10 on real captures, 6 through the time net on D-NeRF scenes). Fewer time
+    /// frequencies make D smooth in t, so one frame's gradient teaches its neighbours.
+    #[serde(default)]
+    pub mlp_x_freqs: u32,
+    #[serde(default)]
+    pub mlp_t_freqs: u32,
     pub lambda_ssim: f32,
     pub background: Background,
     /// Time noise (AST) of Deformable-3DGS: "auto" (on for real captures, off for synthetic
@@ -219,6 +226,17 @@ pub struct TrainConfig {
 pub struct CurriculumConfig {
     pub start: f32,
     pub until: f32,
+    /// Where the window starts: `middle` (centred on the sequence's middle, widening both
+    /// ways) or `first` (the earliest frames, widening forwards: sequential training).
+    pub anchor: CurriculumAnchor,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CurriculumAnchor {
+    #[default]
+    Middle,
+    First,
 }
 
 impl Default for CurriculumConfig {
@@ -226,6 +244,7 @@ impl Default for CurriculumConfig {
         CurriculumConfig {
             start: 1.0,
             until: 0.0,
+            anchor: CurriculumAnchor::Middle,
         }
     }
 }
@@ -430,6 +449,8 @@ impl TrainConfig {
             warm_up: 3000,
             zero_deform_head: true,
             mlp_init_gain: 1.0,
+            mlp_x_freqs: 0,
+            mlp_t_freqs: 0,
             lambda_ssim: 0.2,
             background: Background::Black,
             time_noise: TimeNoise::Auto,

@@ -1,20 +1,21 @@
 //! The collapse guard of a training run: the [`CollapseWatch`] over every step and, with
 //! `on_collapse = rollback`, the in-memory checkpoints it returns to. A checkpoint is taken
 //! every window of steps while the watch reads the run as healthy; a rollback restores the
-//! newest one taken at least two windows before the collapse was confirmed (the fall began at
-//! least one window earlier, and the sliding mean lags by up to one more), so it never
-//! returns to a model that had already started to fall.
+//! newest one taken at least `CONFIRM_WINDOWS + 1` windows before the collapse was confirmed
+//! (the fall began at least that many windows earlier, less the sliding mean's lag of up to
+//! one), so it never returns to a model that had already started to fall.
 
 use std::collections::VecDeque;
 
 use super::checkpoint::Checkpoint;
-use super::collapse::{CollapseEvent, CollapseWatch, OnCollapse, MAX_ROLLBACKS};
+use super::collapse::{CollapseEvent, CollapseWatch, OnCollapse, CONFIRM_WINDOWS, MAX_ROLLBACKS};
 use super::plan::StepPlan;
 use super::Trainer;
 use crate::error::{Error, Result};
 
-/// In-memory checkpoints kept (the newest first to go when a fifth is taken).
-const KEPT: usize = 4;
+/// In-memory checkpoints kept (the oldest but the first go when more are taken): enough to
+/// reach back `CONFIRM_WINDOWS + 1` windows.
+const KEPT: usize = 6;
 
 pub struct CollapseGuard {
     watch: CollapseWatch,
@@ -72,7 +73,9 @@ impl CollapseGuard {
                 ev.iteration, ev.kind, ev.before_db, ev.after_db, tr.deform_lr_scale
             )));
         }
-        let limit = ev.iteration.saturating_sub(2 * self.window);
+        let limit = ev
+            .iteration
+            .saturating_sub((CONFIRM_WINDOWS as u32 + 1) * self.window);
         let target = self
             .kept
             .iter()

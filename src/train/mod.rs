@@ -28,7 +28,7 @@ use crate::kernels::motion::NormConfig;
 use crate::kernels::raster::{Camera, Rasterizer};
 use crate::model::dynamic::DynamicSet;
 use crate::model::gaussians::HostGaussians;
-use crate::model::state::{mlp_config_for, DeformState, GaussianState, Model};
+use crate::model::state::{mlp_config_of, DeformState, GaussianState, Model};
 use crate::vk::{Gpu, Recorder, Timings};
 use checkpoint::Checkpoint;
 use config::{
@@ -109,7 +109,7 @@ impl<'g> Trainer<'g> {
             gaussians: GaussianState::new(gpu, budget, cfg.sh_degree, &init)?,
             deform: DeformState::with_gain(
                 gpu,
-                mlp_config_for(synthetic, cfg.mlp_depth, cfg.mlp_width),
+                mlp_config_of(synthetic, cfg),
                 cfg.seed,
                 cfg.zero_deform_head,
                 cfg.mlp_init_gain,

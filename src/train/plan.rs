@@ -6,7 +6,8 @@
 //! resumed run makes exactly the choices of an uninterrupted one.
 
 use super::config::{
-    Background, DeformMode, MotionOrder, MotionSchedule, SparsityMode, TimeNoise, TrainConfig,
+    Background, CurriculumAnchor, DeformMode, MotionOrder, MotionSchedule, SparsityMode, TimeNoise,
+    TrainConfig,
 };
 use crate::model::optim::ExpLr;
 
@@ -53,7 +54,10 @@ impl FrameTimes {
         if span >= n {
             return frame_for_iteration(cfg.seed, it, n);
         }
-        let lo = (n - span) / 2;
+        let lo = match cfg.curriculum.anchor {
+            CurriculumAnchor::Middle => (n - span) / 2,
+            CurriculumAnchor::First => 0,
+        };
         self.by_time[lo + frame_for_iteration(cfg.seed, it, span)]
     }
 
@@ -546,26 +550,33 @@ mod tests {
         c.curriculum = CurriculumConfig {
             start: 0.2,
             until: 0.5,
+            anchor: CurriculumAnchor::Middle,
         };
         assert_eq!(curriculum_span(&c, 1, n), 5);
         assert_eq!(curriculum_span(&c, 26, n), 13, "half way to iteration 50");
         assert_eq!(curriculum_span(&c, 51, n), n);
         assert_eq!(curriculum_span(&c, 100, n), n);
-        let spread = |its: std::ops::RangeInclusive<u32>| {
+        let spread = |c: &TrainConfig, its: std::ops::RangeInclusive<u32>| {
             let ts: Vec<f32> = its
-                .map(|it| f.times[StepPlan::at(&c, &f, it).frame])
+                .map(|it| f.times[StepPlan::at(c, &f, it).frame])
                 .collect();
             let lo = ts.iter().copied().fold(f32::MAX, f32::min);
             let hi = ts.iter().copied().fold(f32::MIN, f32::max);
             (lo, hi)
         };
         // The first iterations see the 5 middle times only (ranks 8..=12: t 0.4..0.6).
-        let (lo, hi) = spread(1..=3);
+        let (lo, hi) = spread(&c, 1..=3);
         assert!(lo >= 0.4 - 1e-6 && hi <= 0.6 + 1e-6, "{lo} {hi}");
-        let (lo, hi) = spread(51..=100);
+        let (lo, hi) = spread(&c, 51..=100);
         assert!(
             lo == 0.0 && hi == 1.0,
             "all frames once the window is full: {lo} {hi}"
+        );
+        c.curriculum.anchor = CurriculumAnchor::First;
+        let (lo, hi) = spread(&c, 1..=3);
+        assert!(
+            lo == 0.0 && hi <= 0.2 + 1e-6,
+            "the 5 earliest times: {lo} {hi}"
         );
         c.curriculum.start = 0.0;
         assert_eq!(curriculum_span(&c, 1, n), 2, "at least two instants");
