@@ -414,6 +414,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     let mut worst = super::curve::WorstView::default();
     let mut guard = super::guard::CollapseGuard::new(&tr)?;
     let mut collapse = None;
+    let mut dead_warned = false;
     let mut log_file = std::fs::OpenOptions::new()
         .append(true)
         .open(&log_path)
@@ -522,6 +523,20 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
                 None
             };
             let test_psnr = probe.map(|p| p.psnr);
+            let frozen = probe.is_some_and(|p| p.p99_px == Some(0.0));
+            if frozen && tr.view().deform_active && !dead_warned {
+                // Measured at 10× the fast rate: every ReLU of the trunk died and D(x, t)
+                // turned constant in t, silently a static model.
+                dead_warned = true;
+                pb.suspend(|| {
+                    eprintln!(
+                        "warning: iteration {}: the deformation moves no Gaussian between the \
+                         probe frames' times (projected motion p99 = 0 px): the MLP's output is \
+                         constant in time (dead ReLUs; a lower lr.deform_init avoids it)",
+                        l.iteration
+                    )
+                });
+            }
             let worst = worst.take();
             let msg = format!(
                 "loss {:.4} psnr {:.2} (worst view {}){} gaussians {} dynamic {:.0}%",

@@ -215,8 +215,9 @@ pub struct TrainConfig {
 }
 
 /// A time curriculum: the training frames are drawn from the frames whose time ranks lie in a
-/// window centred on the sequence's middle, covering `start` of the frames at the first
-/// iteration and widening linearly to all of them at `until` × iterations. The canonical
+/// window (centred on the sequence's middle, or from its first frame: `anchor`), covering
+/// `start` of the frames through the deformation's warm-up and widening linearly to all of
+/// them at `until` × iterations. The canonical
 /// Gaussians then fit one instant sharply instead of averaging a moving object along its path
 /// (a smear the photometric gradient cannot pull back), and the deformation learns the motion
 /// outwards from that instant a little at a time, where each new time needs a displacement

@@ -226,15 +226,17 @@ pub fn ast_scale(it: u32, frames: usize) -> f64 {
 }
 
 /// Frames the time curriculum allows at 1-based iteration `it` (of `n`; `n` when off or
-/// done): `start · n` at the first iteration, growing linearly to `n` at `until · iterations`,
-/// at least 2 (a single instant has no motion to learn).
+/// done): `start · n` through the deformation's warm-up (the canonical Gaussians fit those
+/// instants sharply while nothing can move), then growing linearly to `n` at
+/// `until · iterations`; at least 2 (a single instant has no motion to learn).
 pub fn curriculum_span(cfg: &TrainConfig, it: u32, n: usize) -> usize {
     let c = &cfg.curriculum;
     if c.start >= 1.0 || n <= 2 {
         return n;
     }
-    let end = (c.until.max(0.0) as f64 * cfg.iterations as f64).max(1.0);
-    let f = ((it.max(1) - 1) as f64 / end).min(1.0);
+    let open = cfg.warm_up as f64;
+    let end = (c.until.max(0.0) as f64 * cfg.iterations as f64).max(open + 1.0);
+    let f = ((it.max(1) as f64 - 1.0 - open).max(0.0) / (end - open)).min(1.0);
     let frac = c.start.max(0.0) as f64 + (1.0 - c.start.max(0.0) as f64) * f;
     ((frac * n as f64).ceil() as usize).clamp(2, n)
 }
@@ -552,8 +554,13 @@ mod tests {
             until: 0.5,
             anchor: CurriculumAnchor::Middle,
         };
+        c.warm_up = 0;
         assert_eq!(curriculum_span(&c, 1, n), 5);
         assert_eq!(curriculum_span(&c, 26, n), 13, "half way to iteration 50");
+        assert_eq!(curriculum_span(&c, 51, n), n);
+        c.warm_up = 20;
+        assert_eq!(curriculum_span(&c, 21, n), 5, "held through the warm-up");
+        assert_eq!(curriculum_span(&c, 36, n), 13, "half way from 20 to 50");
         assert_eq!(curriculum_span(&c, 51, n), n);
         assert_eq!(curriculum_span(&c, 100, n), n);
         let spread = |c: &TrainConfig, its: std::ops::RangeInclusive<u32>| {
