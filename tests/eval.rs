@@ -148,7 +148,14 @@ fn eval_and_render_a_tiny_run() {
         assert_eq!(t["iteration"], first["iteration"]);
         assert_eq!(t["wall_s"], first["wall_s"]);
     }
-    assert!(png_size(&motion.join("training.png")) == (640, 800));
+    // Loss, training PSNR, Gaussians, test PSNR vs seconds, and on this scene (masks and
+    // ground-truth flow) the probe's region PSNRs and the displacement EPE.
+    let probed = lines.iter().find(|l| l["test_psnr"].is_f64()).unwrap();
+    assert!(probed["test_dynamic_psnr"].is_f64() && probed["test_static_psnr"].is_f64());
+    assert!(probed["motion_epe"].as_f64().unwrap() >= 0.0);
+    assert!(probed["motion_gt_px"].as_f64().unwrap() > 0.0);
+    assert_eq!(png_size(&motion.join("training.png")), (640, 1200));
+    assert!(json["dynamic_psnr"].is_f64() && json["static_psnr"].is_f64());
     assert_eq!(png_size(&curves), (800, 400));
     let mean_psnr = json["per_frame"]
         .as_array()
@@ -207,7 +214,7 @@ fn eval_and_render_a_tiny_run() {
         assert_eq!(png_size(p), (7 * 64 + 6 * 2, 64 + 12), "{}", p.display());
     }
     assert_eq!(png_size(&motion.join("eval/per_frame.png")), (640, 480));
-    assert_eq!(png_size(&motion.join("eval/training.png")), (640, 800));
+    assert_eq!(png_size(&motion.join("eval/training.png")), (640, 1200));
 
     // --- render: test path with the flow heatmap and PLY exports ---
     let out = tmp.path().join("render-test");
