@@ -104,6 +104,22 @@ fn config_rejects_unknown_fields_and_bad_values() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("sh_degree"), "{e}");
+    // The recipe knobs of issue 27, each refused by its field name.
+    for (toml, field) in [
+        ("[curriculum]\nstart = 1.5\n", "curriculum.start"),
+        ("[curriculum]\nanchor = \"last\"\n", "anchor"),
+        ("mlp_t_freqs = 40\n", "mlp_t_freqs"),
+        ("mlp_init_gain = 0.0\n", "mlp_init_gain"),
+        ("[collapse]\ndrop_db = -1.0\n", "collapse.drop_db"),
+        ("[collapse]\non_collapse = \"ignore\"\n", "on_collapse"),
+    ] {
+        std::fs::write(&p, toml).unwrap();
+        let e = TrainConfig::from_toml_over(&TrainConfig::fast(), &p)
+            .and_then(|c| c.validate().map(|_| c))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(field), "{toml}: {e}");
+    }
     std::fs::write(&p, "iterations = 'many'\n").unwrap();
     assert!(TrainConfig::from_toml_over(&TrainConfig::fast(), &p).is_err());
     // The written config.toml reads back to the same configuration.

@@ -134,6 +134,15 @@ impl CollapseWatch {
         self.below = 0;
     }
 
+    /// Forgets the recent steps but keeps the best level (after a rollback: the restored state
+    /// is measured against the level the run had before it fell, so a state that falls again
+    /// is neither taken as healthy nor as a new reference).
+    pub fn resume_at(&mut self, best: f64) {
+        self.recent.clear();
+        self.below = 0;
+        self.best = Some(best);
+    }
+
     /// Feeds step `iteration`'s loss and training PSNR; returns the collapse it confirms.
     pub fn see(&mut self, iteration: u32, loss: f64, psnr: f64) -> Option<CollapseEvent> {
         if !loss.is_finite() || psnr.is_nan() {
@@ -167,7 +176,8 @@ impl CollapseWatch {
         if self.below < CONFIRM_WINDOWS * self.window {
             return None;
         }
-        // Reported once: the fallen level is the new reference.
+        // Reported once: the fallen level is the new reference (a rollback puts the old one
+        // back, see `CollapseGuard`).
         self.below = 0;
         self.best = Some(level);
         Some(CollapseEvent {
@@ -267,6 +277,17 @@ mod tests {
             assert!(w.see(it, 0.1, 12.0).is_none());
         }
         assert_eq!(w.best(), Some(12.0));
+        // After a rollback the old best is the reference again: a state that falls again is
+        // not healthy and collapses against it.
+        w.resume_at(20.0);
+        for it in 101..=110 {
+            assert!(w.see(it, 0.1, 17.5).is_none());
+        }
+        assert!(!w.healthy(), "2.5 dB under the restored reference");
+        let e = (111..=200)
+            .find_map(|it| w.see(it, 0.1, 17.5))
+            .expect("collapses again");
+        assert_eq!((e.before_db, e.after_db), (20.0, 17.5));
         assert_eq!(CollapseConfig::default().window_for(600), 15);
         assert_eq!(CollapseConfig::default().window_for(200), 10);
         assert_eq!(CollapseConfig::default().window_for(20_000), 100);

@@ -640,6 +640,24 @@ impl TrainConfig {
         if !(1..=4096).contains(&self.mlp_width) {
             bad("mlp_width", self.mlp_width, "1..=4096")?;
         }
+        if self.mlp_x_freqs > 24 {
+            bad("mlp_x_freqs", self.mlp_x_freqs, "0 (the paper's 10) ..= 24")?;
+        }
+        if self.mlp_t_freqs > 24 {
+            bad("mlp_t_freqs", self.mlp_t_freqs, "0 (the paper's) ..= 24")?;
+        }
+        if !(self.mlp_init_gain.is_finite() && self.mlp_init_gain > 0.0) {
+            bad("mlp_init_gain", self.mlp_init_gain, "a finite value > 0")?;
+        }
+        unit("curriculum.start", self.curriculum.start as f64)?;
+        unit("curriculum.until", self.curriculum.until as f64)?;
+        if !(self.collapse.drop_db.is_finite() && self.collapse.drop_db > 0.0) {
+            bad(
+                "collapse.drop_db",
+                self.collapse.drop_db,
+                "a finite value > 0 (dB)",
+            )?;
+        }
         unit("lambda_ssim", self.lambda_ssim as f64)?;
         non_negative("motion_weight", self.motion_weight as f64)?;
         let lr = &self.lr;

@@ -90,7 +90,8 @@ impl CollapseGuard {
         self.rollbacks += 1;
         // Checkpoints after the one restored belong to the abandoned branch.
         self.kept.retain(|c| c.iteration <= target.iteration);
-        self.watch.restart();
+        // The restored state is measured against the best level before the fall.
+        self.watch.resume_at(ev.before_db);
         ev.rolled_back_to = Some(target.iteration);
         ev.deform_lr_scale = Some(tr.deform_lr_scale);
         Ok(Some(ev))
