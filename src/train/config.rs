@@ -144,8 +144,9 @@ pub struct TrainConfig {
     pub mlp_t_freqs: u32,
     pub lambda_ssim: f32,
     pub background: Background,
-    /// Time noise (AST) of Deformable-3DGS: "auto" (on for real captures, off for synthetic
-    /// scenes), "on" or "off".
+    /// Time noise (AST) of Deformable-3DGS, as its `train.py` computes it: "auto" (on for real
+    /// captures, off for D-NeRF scenes and the built-in scene, whose poses are exact), "on" or
+    /// "off".
     pub time_noise: TimeNoise,
     pub lr: LearningRates,
     pub densify: DensifyConfig,
