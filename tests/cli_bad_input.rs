@@ -755,13 +755,13 @@ fn resume_bad_checkpoints() {
                 edit(&r.join("checkpoints/last.ckpt"), |b| {
                     let hl = u64::from_le_bytes(b[8..16].try_into().unwrap()) as usize;
                     let h = String::from_utf8(b[16..16 + hl].to_vec()).unwrap();
-                    let h1 = h.replacen("\"version\":2", "\"version\":1", 1);
+                    let h1 = h.replacen("\"version\":3", "\"version\":1", 1);
                     assert_ne!(h, h1);
                     b.splice(16..16 + hl, h1.into_bytes());
                 })
             },
             &[],
-            &["last.ckpt", "format version 1", "reads version 2"],
+            &["last.ckpt", "format version 1", "reads version 3"],
         ),
         (
             "flags that differ from the run's config.toml",

@@ -251,6 +251,7 @@ fn model(gpu: &dispflow_vk::vk::Gpu, n: usize, seed: u64) -> Model {
         gaussians: GaussianState::new(gpu, n as u32, 0, &g).unwrap(),
         deform: DeformState::new(gpu, mlp_config_for(true, 3, 32), seed, false).unwrap(),
         dynamic: DynamicSet::new(gpu, n as u32).unwrap(),
+        nodes: None,
     }
 }
 
@@ -269,7 +270,7 @@ fn split_mlp_equals_dense_mlp_on_the_dynamic_rows() {
         sh_coeffs: 1,
         isect_guess: 1 << 10,
     };
-    let pass = DeformPass::new(&gpu, &m.deform.cfg, &sizes, 1, true).unwrap();
+    let pass = DeformPass::new(&gpu, &m.deform.cfg, None, &sizes, 1, true).unwrap();
     let mut r = Noise::new(9);
     let flags: Vec<u32> = (0..n).map(|_| (r.next_u32() % 4 == 0) as u32).collect();
     let d_out = uniform(&mut r, n * OUT_DIMS, -1.0, 1.0);
@@ -405,6 +406,7 @@ fn late_mover_is_picked_up_by_the_next_split() {
         gaussians: GaussianState::new(&gpu, n as u32, 0, &g).unwrap(),
         deform: DeformState::new(&gpu, cfg, 1, true).unwrap(),
         dynamic: DynamicSet::new(&gpu, n as u32).unwrap(),
+        nodes: None,
     };
     let sizes = StepSizes {
         capacity: n as u32,
@@ -413,7 +415,7 @@ fn late_mover_is_picked_up_by_the_next_split() {
         sh_coeffs: 1,
         isect_guess: 1 << 10,
     };
-    let pass = DeformPass::new(&gpu, &cfg, &sizes, 1, false).unwrap();
+    let pass = DeformPass::new(&gpu, &cfg, None, &sizes, 1, false).unwrap();
     // One camera 4 units from the origin, focal 100 px: 1 px ≈ 0.04 scene units there.
     let cam = Camera {
         rot: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],

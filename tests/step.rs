@@ -581,6 +581,7 @@ mod gpu_step {
             gaussians: GaussianState::new(gpu, cap, s.sh_degree, &s.gaussians).unwrap(),
             deform,
             dynamic: DynamicSet::new(gpu, cap).unwrap(),
+            nodes: None,
         };
         if split {
             let all = SplitSnapshot {
@@ -614,7 +615,7 @@ mod gpu_step {
         };
         let cfg = &model.deform.cfg;
         let mut passes = StepPasses {
-            deform: DeformPass::new(gpu, cfg, &sizes, 2, true).unwrap(),
+            deform: DeformPass::new(gpu, cfg, None, &sizes, 2, true).unwrap(),
             render: RenderPass::new(raster.clone(), gpu, &sizes, 3).unwrap(),
             loss: PhotoLoss::new(gpu, &sizes).unwrap(),
             motion: Some(

@@ -433,4 +433,13 @@ struct RowsParams {
     uint pad1;
 };
 
+// src/kernels/nodes.rs — the control-node deformation field (KNN, blend, gather).
+struct NodesParams {
+    uint n;          // rows: Gaussians (knn, lbs dense), dynamic rows (lbs indexed), pairs (ranges)
+    uint m;          // control nodes
+    uint k;          // nearest nodes per Gaussian (<= NODES_KMAX)
+    uint flags;      // knn: 1 = split (static Gaussians get no nodes); lbs: 1 = rows through idx;
+                     // gather: 1 = add the node-parameter gradients instead of writing them
+};
+
 #endif

@@ -145,6 +145,7 @@ impl Evaluator {
         gpu: &Gpu,
         raster: Rc<Rasterizer>,
         mlp: &MlpConfig,
+        field: Option<&crate::model::nodes::FieldConfig>,
         s: &StepSizes,
         flow: FlowConfig,
         lambda_ssim: f32,
@@ -154,7 +155,7 @@ impl Evaluator {
         let metrics = MotionMetrics::new(gpu)?;
         let flow = TvL1Flow::new(gpu, flow)?;
         Ok(Evaluator {
-            deform: DeformPass::new(gpu, mlp, s, 2, false)?,
+            deform: DeformPass::new(gpu, mlp, field, s, 2, false)?,
             render: RenderPass::new(raster, gpu, s, 3)?,
             loss: PhotoLoss::new(gpu, s)?,
             full: gpu.buffer("eval full render", s.pixels() * 16)?,

@@ -12,6 +12,7 @@ use crate::error::{Error, Result};
 use crate::model::deform::MlpLayout;
 use crate::model::dynamic::SplitSnapshot;
 use crate::model::gaussians::HostGaussians;
+use crate::model::nodes::FieldKind;
 use crate::model::state::{gaussian_blobs, mlp_config_of};
 use crate::report::{self, Plot, Series, PALETTE};
 use crate::train::checkpoint::{read_ply, write_atomic};
@@ -30,6 +31,8 @@ pub struct Run {
     pub mlp: Vec<f32>,
     /// The dynamic/static split (`dynamic.bin`); `None`: all dynamic.
     pub dynamic: Option<SplitSnapshot>,
+    /// The control nodes (`nodes.bin`, [4M] f32) of a nodes-field run; `None` for the MLP field.
+    pub nodes: Option<Vec<f32>>,
 }
 
 /// Floats per Gaussian in `dynamic.bin`: the flag (0.0 static, 1.0 dynamic), then the
@@ -210,6 +213,29 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     } else {
         None
     };
+    let nodes_path = dir.join("nodes.bin");
+    let nodes = match cfg.deform_field.kind {
+        FieldKind::Nodes if nodes_path.is_file() => {
+            let b = std::fs::read(&nodes_path).map_err(|source| Error::Io {
+                path: nodes_path.display().to_string(),
+                source,
+            })?;
+            let max = cfg.deform_field.nodes as usize;
+            if b.len() % 16 != 0 || b.is_empty() || b.len() > 16 * max {
+                return Err(invalid(
+                    &nodes_path,
+                    format!(
+                        "{} bytes; expected 16 per control node (position, log-radius) for 1 to \
+                         {max} nodes (config.toml's deform_field.nodes)",
+                        b.len()
+                    ),
+                ));
+            }
+            Some(bytemuck::pod_collect_to_vec(&b))
+        }
+        // A nodes run stopped during the warm-up: no node was placed yet.
+        _ => None,
+    };
     Ok(Run {
         dir: dir.to_path_buf(),
         cfg,
@@ -218,6 +244,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
         gaussians,
         mlp,
         dynamic,
+        nodes,
     })
 }
 
@@ -228,6 +255,10 @@ pub fn load_trainer<'g>(gpu: &'g Gpu, run: &Run) -> Result<(Dataset, Trainer<'g>
     tr.load_model(&run.gaussians, &run.mlp, run.iterations)
         .map_err(|e| invalid(&run.dir, format!("the saved model does not load: {e}")))?;
     tr.model.dynamic.upload(gpu, run.dynamic.as_ref())?;
+    if let (Some(ns), Some(p)) = (tr.model.nodes.as_mut(), &run.nodes) {
+        let nodes = run.dir.join("nodes.bin");
+        ns.upload(gpu, p, None).map_err(|e| invalid(&nodes, e))?;
+    }
     Ok((ds, tr))
 }
 

@@ -303,7 +303,14 @@ fn score(
     let metrics = MotionMetrics::new(gpu)?;
     let raster = tr.raster();
     let mut p = Probe {
-        deform: DeformPass::new(gpu, &tr.model.deform.cfg, &s, 2, false)?,
+        deform: DeformPass::new(
+            gpu,
+            &tr.model.deform.cfg,
+            crate::train::node_cfg(&tr.model),
+            &s,
+            2,
+            false,
+        )?,
         r1: RenderPass::new(raster.clone(), gpu, &s, 3)?,
         r2: RenderPass::new(raster, gpu, &s, 0)?,
         watch: OverflowWatch::new(gpu, "signal overflow flags", 2)?,

@@ -14,6 +14,7 @@ pub mod mlp;
 pub mod mlp_fused;
 pub mod mlp_rows;
 pub mod motion;
+pub mod nodes;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;
@@ -64,6 +65,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         ),
         layout!(sparse::FlagParams, n, threshold_px, pad0, pad1),
         layout!(sparse::RowsParams, n, width, pad0, pad1),
+        layout!(nodes::NodesParams, n, m, k, flags),
         layout!(
             densify::DensifyStatsParams,
             num_gaussians,

@@ -30,6 +30,8 @@ pub struct DynamicSet {
     /// [capacity, 10] the constant deformation of each static Gaussian.
     pub fixed: Buffer,
     split: Option<u32>,
+    /// Bumped whenever the split changes (the control nodes' KNN depends on it).
+    generation: u64,
 }
 
 impl DynamicSet {
@@ -44,6 +46,7 @@ impl DynamicSet {
             count: gpu.buffer("dynamic count", 256)?,
             fixed: gpu.buffer("static deformation", capacity.max(1) as u64 * 40)?,
             split: None,
+            generation: 0,
         })
     }
 
@@ -54,11 +57,20 @@ impl DynamicSet {
 
     /// Every Gaussian dynamic again (the dense path).
     pub fn set_dense(&mut self) {
+        if self.split.is_some() {
+            self.generation += 1;
+        }
         self.split = None;
+    }
+
+    /// Changes whenever the split does.
+    pub fn generation(&self) -> u64 {
+        self.generation
     }
 
     /// After the GPU compaction wrote `idx`, `row_of` and `count`: `count` dynamic Gaussians.
     pub fn set_split(&mut self, count: u32) {
+        self.generation += 1;
         self.split = Some(count);
     }
 
@@ -98,6 +110,7 @@ impl DynamicSet {
     /// Splits as `s` says (a restored checkpoint or a loaded run): uploads the flags, the
     /// static deformations and the compaction. `None` makes the model dense.
     pub fn upload(&mut self, gpu: &Gpu, s: Option<&SplitSnapshot>) -> Result<()> {
+        self.generation += 1;
         let Some(s) = s else {
             self.split = None;
             return Ok(());

@@ -4,5 +4,6 @@
 pub mod deform;
 pub mod dynamic;
 pub mod gaussians;
+pub mod nodes;
 pub mod optim;
 pub mod state;

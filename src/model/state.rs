@@ -6,6 +6,7 @@
 use super::deform::{MlpConfig, MlpLayout, TimeEncoding};
 use super::dynamic::{DynamicSet, SplitSnapshot};
 use super::gaussians::{GaussianLayout, HostGaussians, Section};
+use super::nodes::{NodeSnapshot, NodeState};
 use crate::error::{Error, Result};
 use crate::kernels::deform::Canonical;
 use crate::kernels::raster::SplatInputs;
@@ -255,6 +256,8 @@ pub struct Model {
     pub deform: DeformState,
     /// Which Gaussians the deformation moves (all, until the first classification).
     pub dynamic: DynamicSet,
+    /// The control nodes when the deformation field is `nodes` (the MLP then runs at them).
+    pub nodes: Option<NodeState>,
 }
 
 /// What a model was built for that its blobs do not show: MLP depth and width (the parameter
@@ -266,6 +269,12 @@ pub struct ModelShape {
     pub mlp_depth: u32,
     pub mlp_width: u32,
     pub budget: u32,
+    /// Control nodes of the `nodes` field (0: the MLP field) and their K; absent from
+    /// checkpoints written before the field existed (they are MLP-field runs).
+    #[serde(default)]
+    pub nodes: u32,
+    #[serde(default)]
+    pub knn: u32,
 }
 
 /// The model's part of a checkpoint (parameters and Adam moments; the trainer adds its
@@ -281,6 +290,8 @@ pub struct ModelSnapshot {
     pub mlp_v: Vec<f32>,
     /// The dynamic/static split when the model is split; `None` when dense.
     pub dynamic: Option<SplitSnapshot>,
+    /// The control nodes once placed (`nodes` field after the warm-up).
+    pub nodes: Option<NodeSnapshot>,
 }
 
 /// One named array of a snapshot, as checkpoints store it.
@@ -357,6 +368,20 @@ impl ModelSnapshot {
                 non_negative,
             });
         }
+        if let Some(n) = &self.nodes {
+            for (name, data, non_negative) in [
+                ("node_params", &n.params, false),
+                ("node_m", &n.m, false),
+                ("node_v", &n.v, true),
+            ] {
+                b.push(Blob {
+                    name: name.into(),
+                    data,
+                    row: None,
+                    non_negative,
+                });
+            }
+        }
         b
     }
 }
@@ -368,6 +393,8 @@ impl Model {
             mlp_depth: self.deform.cfg.depth,
             mlp_width: self.deform.cfg.width,
             budget: self.gaussians.layout.capacity,
+            nodes: self.nodes.as_ref().map_or(0, |n| n.cfg.nodes),
+            knn: self.nodes.as_ref().map_or(0, |n| n.cfg.knn),
         }
     }
 
@@ -384,6 +411,10 @@ impl Model {
             mlp_m: gpu.read(d.m.all())?,
             mlp_v: gpu.read(d.v.all())?,
             dynamic: self.dynamic.download(gpu, g.n)?,
+            nodes: match &self.nodes {
+                Some(n) if n.placed() => Some(n.download(gpu, g.n)?),
+                _ => None,
+            },
         })
     }
 
@@ -413,6 +444,20 @@ impl Model {
                 have.mlp_depth, have.mlp_width, want.mlp_depth, want.mlp_width
             ));
         }
+        if (have.nodes, have.knn) != (want.nodes, want.knn) {
+            let field = |nodes: u32, knn: u32| match nodes {
+                0 => "the MLP field (deform_field.kind = mlp)".to_string(),
+                m => format!("{m} control nodes with K = {knn} (deform_field.kind = nodes)"),
+            };
+            return mismatch(format!(
+                "deformation field: the checkpoint's run had {}; this configuration has {}",
+                field(have.nodes, have.knn),
+                field(want.nodes, want.knn)
+            ));
+        }
+        if s.nodes.is_some() && self.nodes.is_none() {
+            return mismatch("blob node_params: this configuration has no control nodes".into());
+        }
         if have.budget != want.budget {
             return mismatch(format!(
                 "Gaussian budget: the checkpoint's run had densify.budget = {}; this \
@@ -428,8 +473,19 @@ impl Model {
                 asked: n as u64,
             });
         }
+        let node_floats = s.nodes.as_ref().map_or(0, |v| v.params.len());
+        if node_floats % 4 != 0 || node_floats > 4 * want.nodes as usize {
+            return mismatch(format!(
+                "blob node_params: {node_floats} floats; expected 4 per node for at most {} nodes",
+                want.nodes
+            ));
+        }
         for b in s.blobs() {
-            let want_len = b.row.map_or(self.deform.layout.total, |r| n * r);
+            let want_len = match b.row {
+                _ if b.name.starts_with("node_") => node_floats,
+                Some(r) => n * r,
+                None => self.deform.layout.total,
+            };
             if b.data.len() != want_len {
                 let what = if b.row.is_some() {
                     format!("{n} Gaussians need {want_len}")
@@ -470,6 +526,15 @@ impl Model {
         gpu.upload(d.m.all(), &s.mlp_m)?;
         gpu.upload(d.v.all(), &s.mlp_v)?;
         self.dynamic.upload(gpu, s.dynamic.as_ref())?;
+        if let Some(nodes) = self.nodes.as_mut() {
+            match &s.nodes {
+                Some(v) => {
+                    let (n, generation) = (self.gaussians.n, self.dynamic.generation());
+                    nodes.restore(gpu, v, n, generation)?
+                }
+                None => nodes.clear(),
+            }
+        }
         Ok(())
     }
 

@@ -12,6 +12,7 @@ pub mod lpips;
 pub mod metrics;
 pub mod mlp;
 pub mod motion;
+pub mod nodes;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;

@@ -17,15 +17,20 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::kernels::nodes::NO_NODE;
 use crate::model::dynamic::SplitSnapshot;
 use crate::model::gaussians::HostGaussians;
+use crate::model::nodes::NodeSnapshot;
 use crate::model::state::{ModelShape, ModelSnapshot};
 
 const MAGIC: &[u8; 8] = b"DFVKCKPT";
 
 /// The checkpoint format this build writes and reads. Version 1 (no checksums, no model
 /// shape) is refused with a message that says so.
-pub const CHECKPOINT_VERSION: u32 = 2;
+pub const CHECKPOINT_VERSION: u32 = 3;
+/// Older formats this build still reads: version 2 lacks only the optional control-node blobs
+/// and shape fields (an MLP-field run).
+const READS_VERSIONS: [u32; 2] = [2, 3];
 
 /// Names of the densification statistics blobs, in [`Checkpoint::densify_stats`] order.
 pub const DENSIFY_STATS: [&str; 3] = ["grad_accum", "denom", "max_radii"];
@@ -187,6 +192,16 @@ impl Checkpoint {
             blobs.push(("dynamic".to_string(), f));
             blobs.push(("dynamic_fixed".to_string(), &d.fixed));
         }
+        // Node indices as f32 (exact below 2^24), an empty slot as −1.
+        let knn: Option<Vec<f32>> = (self.model.nodes.as_ref())
+            .filter(|n| !n.knn.is_empty())
+            .map(|n| {
+                let f = |j: u32| if j == NO_NODE { -1.0 } else { j as f32 };
+                n.knn.iter().map(|&j| f(j)).collect()
+            });
+        if let Some(k) = &knn {
+            blobs.push(("node_knn".to_string(), k));
+        }
         let header = Header {
             version: CHECKPOINT_VERSION,
             iteration: self.iteration,
@@ -235,12 +250,13 @@ impl Checkpoint {
         let any: serde_json::Value =
             serde_json::from_slice(hdr).map_err(|e| bad(path, &format!("header: {e}")))?;
         match any.get("version").and_then(|v| v.as_u64()) {
-            Some(v) if v == CHECKPOINT_VERSION as u64 => {}
+            Some(v) if READS_VERSIONS.iter().any(|&r| r as u64 == v) => {}
             Some(v) => {
                 return Err(bad(
                     path,
                     &format!(
-                        "format version {v}; this build reads version {CHECKPOINT_VERSION} \
+                        "format version {v}; this build reads version {CHECKPOINT_VERSION} (and 2, \
+                         written before the control-node field) \
                          (start the run again without --resume, or resume with the build \
                          that wrote it)"
                     ),
@@ -364,6 +380,45 @@ impl Checkpoint {
                 ))
             }
         };
+        let nodes = match (
+            m.remove("node_params"),
+            m.remove("node_m"),
+            m.remove("node_v"),
+        ) {
+            (None, None, None) => None,
+            (Some(params), Some(nm), Some(nv))
+                if nm.len() == params.len() && nv.len() == params.len() =>
+            {
+                let knn = m.remove("node_knn").unwrap_or_default();
+                let bad_entry = knn.iter().position(|&v| {
+                    !(v == -1.0 || ((0.0..16_777_216.0).contains(&v) && v.fract() == 0.0))
+                });
+                if let Some(i) = bad_entry {
+                    return Err(bad(
+                        path,
+                        &format!(
+                            "blob node_knn: entry {i} is {}; expected a node index or -1",
+                            knn[i]
+                        ),
+                    ));
+                }
+                Some(NodeSnapshot {
+                    params,
+                    m: nm,
+                    v: nv,
+                    knn: knn
+                        .iter()
+                        .map(|&v| if v < 0.0 { NO_NODE } else { v as u32 })
+                        .collect(),
+                })
+            }
+            _ => {
+                return Err(bad(
+                    path,
+                    "blobs node_params, node_m and node_v: all three of one length, or none",
+                ))
+            }
+        };
         if let Some(k) = m.keys().next() {
             return Err(bad(path, &format!("unexpected blob {k}")));
         }
@@ -387,6 +442,7 @@ impl Checkpoint {
                 mlp_m,
                 mlp_v,
                 dynamic,
+                nodes,
             },
             densify_stats,
         })

@@ -52,6 +52,18 @@ pub struct TrainArgs {
     /// Deformation MLP depth [preset: paper 8, fast 4].
     #[arg(long)]
     pub mlp_depth: Option<u32>,
+    /// Deformation field: mlp (Deformable-3DGS: the MLP at every Gaussian) or nodes (SC-GS:
+    /// the MLP at --nodes control nodes placed by farthest-point sampling when the deformation
+    /// starts, each Gaussian blending its --knn nearest nodes' rigid transforms; the MLP's
+    /// cost then follows the node count, not the Gaussian count) [default: mlp].
+    #[arg(long, value_enum)]
+    pub deform_field: Option<crate::model::nodes::FieldKind>,
+    /// Control nodes of the nodes field [default: 512].
+    #[arg(long)]
+    pub nodes: Option<u32>,
+    /// Nearest nodes each Gaussian blends, 1-8 [default: 4].
+    #[arg(long)]
+    pub knn: Option<u32>,
     /// Most Gaussians the run may hold [preset: paper 500000, fast 20000].
     #[arg(long)]
     pub budget: Option<u32>,
@@ -260,6 +272,10 @@ pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig>
     c.sh_degree = a.sh_degree.unwrap_or(c.sh_degree);
     c.mlp_width = a.mlp_width.unwrap_or(c.mlp_width);
     c.mlp_depth = a.mlp_depth.unwrap_or(c.mlp_depth);
+    let f = &mut c.deform_field;
+    f.kind = a.deform_field.unwrap_or(f.kind);
+    f.nodes = a.nodes.unwrap_or(f.nodes);
+    f.knn = a.knn.unwrap_or(f.knn);
     c.densify.budget = a.budget.unwrap_or(c.densify.budget);
     c.background = a.background.unwrap_or(c.background);
     c.seed = a.seed.unwrap_or(c.seed);
@@ -380,7 +396,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         write_atomic(&log_path, b"")?;
     }
     eprintln!(
-        "training {} frames ({} val) at {}×{}, {} Gaussians, MLP {}×{}, {} iterations",
+        "training {} frames ({} val) at {}×{}, {} Gaussians, MLP {}×{}{}, {} iterations",
         tr.frames.len(),
         tr.val.len(),
         dataset.train[0].camera.width,
@@ -388,6 +404,10 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
         tr.n(),
         cfg.mlp_depth,
         cfg.mlp_width,
+        match tr.model.nodes.as_ref() {
+            Some(n) => format!(" at {} control nodes (K = {})", n.cfg.nodes, n.cfg.knn),
+            None => String::new(),
+        },
         cfg.iterations
     );
     let initial_psnr = if tr.iteration == 0 {
@@ -624,6 +644,10 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     write_ply(&out.join("point_cloud.ply"), &tr.gaussians()?)?;
     let mlp = tr.model.deform.download(&gpu)?;
     write_atomic(&out.join("deform.bin"), bytemuck::cast_slice(&mlp))?;
+    if let Some(ns) = tr.model.nodes.as_ref().filter(|n| n.placed()) {
+        let p = ns.download(&gpu, tr.n())?.params;
+        write_atomic(&out.join("nodes.bin"), bytemuck::cast_slice(&p))?;
+    }
     let dynamic_bin = out.join("dynamic.bin");
     match tr.model.dynamic.download(&gpu, tr.n())? {
         Some(d) => write_atomic(&dynamic_bin, &crate::eval::run::dynamic_bin(&d))?,

@@ -213,6 +213,10 @@ pub struct TrainConfig {
     /// widens to all frames (see [`CurriculumConfig`]).
     #[serde(default)]
     pub curriculum: CurriculumConfig,
+    /// The deformation field: the per-Gaussian MLP (Deformable-3DGS) or control nodes
+    /// (SC-GS: the MLP at a few hundred nodes, blended into every Gaussian; docs/nodes.md).
+    #[serde(default)]
+    pub deform_field: crate::model::nodes::FieldConfig,
 }
 
 /// A time curriculum: the training frames are drawn from the frames whose time ranks lie in a
@@ -478,6 +482,7 @@ impl TrainConfig {
             keep_checkpoints: false,
             collapse: super::collapse::CollapseConfig::default(),
             curriculum: CurriculumConfig::default(),
+            deform_field: Default::default(),
         }
     }
 
@@ -650,6 +655,7 @@ impl TrainConfig {
         if !(self.mlp_init_gain.is_finite() && self.mlp_init_gain > 0.0) {
             bad("mlp_init_gain", self.mlp_init_gain, "a finite value > 0")?;
         }
+        self.deform_field.validate().map_err(|e| e.to_string())?;
         unit("curriculum.start", self.curriculum.start as f64)?;
         unit("curriculum.until", self.curriculum.until as f64)?;
         if !(self.collapse.drop_db.is_finite() && self.collapse.drop_db > 0.0) {

@@ -28,6 +28,7 @@ use crate::kernels::motion::NormConfig;
 use crate::kernels::raster::{Camera, Rasterizer};
 use crate::model::dynamic::DynamicSet;
 use crate::model::gaussians::HostGaussians;
+use crate::model::nodes::{FieldKind, NodeState};
 use crate::model::state::{mlp_config_of, DeformState, GaussianState, Model};
 use crate::vk::{Gpu, Recorder, Timings};
 use checkpoint::Checkpoint;
@@ -115,6 +116,9 @@ impl<'g> Trainer<'g> {
                 cfg.mlp_init_gain,
             )?,
             dynamic: DynamicSet::new(gpu, budget)?,
+            nodes: (cfg.deform_field.kind == FieldKind::Nodes && cfg.deform == DeformMode::On)
+                .then(|| NodeState::new(gpu, cfg.deform_field, budget))
+                .transpose()?,
         };
         let sizes = StepSizes {
             capacity: budget,
@@ -218,6 +222,7 @@ impl<'g> Trainer<'g> {
             if !p.sparse {
                 self.model.dynamic.set_dense();
             }
+            self.update_nodes(&p, &mut rec)?;
             let (m, s) = (&self.model, self.passes.as_mut().expect("built"));
             step::record_step(&mut rec, &p, m, s, &self.frames, self.cfg.lambda_ssim);
             let timings = rec.finish()?;
@@ -261,11 +266,34 @@ impl<'g> Trainer<'g> {
         }
     }
 
+    /// The control nodes before step `p`: placed when the deformation starts (farthest-point
+    /// sampling of the canonical means, read back here, between steps), their KNN refreshed
+    /// every `knn_every` steps.
+    fn update_nodes(&mut self, p: &StepPlan, rec: &mut Recorder<'_>) -> Result<()> {
+        let Some(ns) = self.model.nodes.as_mut() else {
+            return Ok(());
+        };
+        if p.deform_active && !ns.placed() {
+            let means = self.model.gaussians.download(self.gpu)?.means;
+            ns.place(self.gpu, &means)?;
+        }
+        let every = ns.cfg.knn_every;
+        if every > 0 && p.iteration % every == 0 {
+            ns.invalidate_knn();
+        }
+        let s = self.passes.as_ref().expect("built");
+        s.deform.ensure_knn(rec, &self.model);
+        Ok(())
+    }
+
     /// 3DGS density control after step `p`, as its plan says.
     fn densify_if_due(&mut self, p: &StepPlan) -> Result<()> {
         let d = &self.passes.as_ref().expect("a step ran").densify;
         if let Some(screen_cut) = p.densify {
             d.densify(self.gpu, &mut self.model.gaussians, p.iteration, screen_cut)?;
+            if let Some(ns) = self.model.nodes.as_mut() {
+                ns.invalidate_knn(); // new rows, and survivors moved to other rows
+            }
         }
         if p.opacity_reset {
             d.reset_opacity(self.gpu, &self.model.gaussians)?;
@@ -307,6 +335,7 @@ impl<'g> Trainer<'g> {
                 self.gpu,
                 self.raster.clone(),
                 &self.model.deform.cfg,
+                node_cfg(&self.model),
                 &self.sizes,
                 self.cfg.scene_motion.flow_config(&self.cfg.flow_preset)?,
                 self.cfg.lambda_ssim,
@@ -536,7 +565,7 @@ fn build_passes(
     };
     let slots = 1 + motion_on as usize;
     Ok(StepPasses {
-        deform: DeformPass::new(gpu, &model.deform.cfg, sizes, slots, true)?,
+        deform: DeformPass::new(gpu, &model.deform.cfg, node_cfg(model), sizes, slots, true)?,
         render: RenderPass::new(raster.clone(), gpu, sizes, photo_feats)?,
         loss: PhotoLoss::new(gpu, sizes)?,
         motion,
@@ -545,6 +574,11 @@ fn build_passes(
         watch: OverflowWatch::new(gpu, "step overflow flags", 2)?,
         classifier: classifier(gpu, cfg, sizes, times, frames)?,
     })
+}
+
+/// The control-node settings when the model has nodes.
+pub fn node_cfg(model: &Model) -> Option<&crate::model::nodes::FieldConfig> {
+    model.nodes.as_ref().map(|n| &n.cfg)
 }
 
 /// The motion probe when the configuration splits the model.

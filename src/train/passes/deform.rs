@@ -8,13 +8,17 @@
 //! and a static Gaussian's δ is exactly 0), and the backward gathers
 //! the output gradients of the same rows. The dense path is the code that ran before.
 
+use std::cell::Cell;
+
 use super::{row, StepSizes};
 use crate::error::Result;
 use crate::kernels::deform::{DeformApply, Drawn};
 use crate::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
+use crate::kernels::nodes::{BlendInputs, NodeBuffers, NodeKernels};
 use crate::kernels::sparse::SparseKernels;
 use crate::model::deform::MlpConfig;
 use crate::model::gaussians::Section;
+use crate::model::nodes::{FieldConfig, NodeState};
 use crate::model::state::Model;
 use crate::vk::{BufSlice, Buffer, Gpu, Recorder};
 
@@ -36,6 +40,17 @@ struct SlotBuffers {
     /// The MLP's output and output gradient over the dynamic rows only (split model).
     compact_out: Buffer,
     compact_d_out: Option<Buffer>,
+    /// The MLP's output at the control nodes [M,10] and its gradient (nodes field).
+    node_out: Option<Buffer>,
+    node_d_out: Option<Buffer>,
+}
+
+/// The control-node field's kernels and the backward's scratch.
+struct NodeField {
+    kernels: NodeKernels,
+    bufs: NodeBuffers,
+    /// The model's KNN epoch the sorted gather lists were built for.
+    pairs_for: Cell<Option<u64>>,
 }
 
 pub struct DeformPass {
@@ -45,13 +60,16 @@ pub struct DeformPass {
     /// The dynamic Gaussians' canonical means, gathered (split model).
     compact_means: Buffer,
     slots: Vec<SlotBuffers>,
+    nodes: Option<NodeField>,
 }
 
 impl DeformPass {
-    /// `slots` time slots (1 or 2); `backward`: also the MLP-output gradients.
+    /// `slots` time slots (1 or 2); `backward`: also the MLP-output gradients; `field`: the
+    /// control-node field's settings when the model has nodes.
     pub fn new(
         gpu: &Gpu,
         cfg: &MlpConfig,
+        field: Option<&FieldConfig>,
         s: &StepSizes,
         slots: usize,
         backward: bool,
@@ -62,6 +80,10 @@ impl DeformPass {
             .map(|k| {
                 let name = |what: &str| format!("{what} (time slot {k})");
                 let rows = |what: &str, floats: u64| gpu.buffer(&name(what), cap * floats * 4);
+                let node_rows = |what: &str| {
+                    let m = field.map_or(0, |f| f.nodes as u64);
+                    gpu.buffer(&name(what), m * row::DEFORM * 4)
+                };
                 Ok(SlotBuffers {
                     mlp: mlp.buffers(gpu, s.capacity)?,
                     out: rows("deformation", row::DEFORM)?,
@@ -77,6 +99,11 @@ impl DeformPass {
                     compact_d_out: backward
                         .then(|| rows("dynamic deformation grads", row::DEFORM))
                         .transpose()?,
+                    node_out: field.map(|_| node_rows("node transforms")).transpose()?,
+                    node_d_out: field
+                        .filter(|_| backward)
+                        .map(|_| node_rows("node transform grads"))
+                        .transpose()?,
                 })
             })
             .collect::<Result<Vec<_>>>()?;
@@ -86,7 +113,143 @@ impl DeformPass {
             rows: SparseKernels::new(gpu)?,
             compact_means: gpu.buffer("dynamic means", cap * row::VEC3 * 4)?,
             slots,
+            nodes: field
+                .map(|f| -> Result<NodeField> {
+                    let kernels = NodeKernels::new(gpu)?;
+                    Ok(NodeField {
+                        bufs: kernels.buffers(gpu, s.capacity, f.nodes, f.knn)?,
+                        kernels,
+                        pairs_for: Cell::new(None),
+                    })
+                })
+                .transpose()?,
         })
+    }
+
+    /// The placed control nodes and this pass's field, when the model blends nodes.
+    fn node_field<'a>(&'a self, model: &'a Model) -> Option<(&'a NodeField, &'a NodeState)> {
+        let ns = model.nodes.as_ref()?;
+        Some((
+            self.nodes
+                .as_ref()
+                .expect("a pass built for the nodes field"),
+            ns,
+        ))
+    }
+
+    /// Recomputes the model's KNN when it is stale (placement, densification, a new split,
+    /// every `knn_every` steps: the trainer invalidates it) — only then, so a resumed run
+    /// blends with exactly the KNN the uninterrupted one had.
+    pub fn ensure_knn(&self, rec: &mut Recorder<'_>, model: &Model) {
+        let Some((f, ns)) = self.node_field(model).filter(|(_, ns)| ns.placed()) else {
+            return;
+        };
+        let (g, d) = (&model.gaussians, &model.dynamic);
+        if ns.knn_for.get() == Some((g.n, d.generation())) {
+            return;
+        }
+        let means = g.param(Section::Means);
+        let row_of = d.split().map(|_| d.row_of());
+        let (n, m, k) = (g.n, ns.m, ns.cfg.knn);
+        let nodes = ns.param_block();
+        (f.kernels).record_knn(rec, ns.knn_rows(n), n, m, k, means, nodes, row_of);
+        ns.knn_updated(n, d.generation());
+    }
+
+    /// Rebuilds the gather's per-node pair lists when the model's KNN changed.
+    fn ensure_pairs(&self, rec: &mut Recorder<'_>, model: &Model, f: &NodeField, ns: &NodeState) {
+        let epoch = Some(ns.knn_epoch.get());
+        if f.pairs_for.get() == epoch {
+            return;
+        }
+        f.pairs_for.set(epoch);
+        let n = model.gaussians.n;
+        (f.kernels).record_pairs(rec, &f.bufs, ns.knn_rows(n), n, ns.m);
+    }
+
+    fn blend_inputs<'a>(&'a self, model: &'a Model, ns: &'a NodeState, k: Slot) -> BlendInputs<'a> {
+        let g = &model.gaussians;
+        BlendInputs {
+            m: ns.m,
+            k: ns.cfg.knn,
+            knn: ns.knn_rows(g.n),
+            means: g.param(Section::Means),
+            quats: g.param(Section::Quats),
+            nodes: ns.param_block(),
+            node_out: self.slot(k).node_out.as_ref().expect("nodes field").all(),
+        }
+    }
+
+    /// D(·, t) of the control-node field into slot `k`: the MLP at the nodes, then the blend
+    /// (over the dynamic rows when split). Unplaced nodes (before the deformation started)
+    /// give D ≡ 0.
+    fn nodes_forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32) {
+        let (f, ns) = self.node_field(model).expect("nodes field");
+        let (g, s, dynamic) = (&model.gaussians, self.slot(k), &model.dynamic);
+        if !ns.placed() {
+            rec.fill(s.out.slice(0, g.n as u64 * row::DEFORM * 4), 0);
+            return;
+        }
+        self.ensure_knn(rec, model);
+        let params = model.deform.params.all();
+        let x = self.blend_inputs(model, ns, k);
+        let time = MlpTime::Batch(t);
+        self.mlp
+            .forward(rec, &s.mlp, ns.m, ns.positions(), time, params, x.node_out);
+        let Some(count) = dynamic.split() else {
+            (f.kernels).record_lbs(rec, g.n, &x, None, s.out.all());
+            return;
+        };
+        if count > 0 {
+            let (idx, out) = (Some(dynamic.idx()), s.compact_out.all());
+            (f.kernels).record_lbs(rec, count, &x, idx, out);
+        }
+        let (row_of, out, fixed) = (dynamic.row_of(), s.compact_out.all(), dynamic.fixed());
+        let width = row::DEFORM as u32;
+        self.rows
+            .expand(rec, g.n, width, row_of, out, fixed, s.out.all());
+    }
+
+    /// Backward of [`Self::nodes_forward`] from slot `k`'s output gradient: the blend's
+    /// contributions (and its canonical mean/rotation terms, added), the per-node gather,
+    /// then the MLP's weight gradients at the nodes.
+    fn nodes_backward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, accumulate: bool) {
+        let (f, ns) = self.node_field(model).expect("nodes field");
+        let (g, s, dynamic, d) = (
+            &model.gaussians,
+            self.slot(k),
+            &model.dynamic,
+            &model.deform,
+        );
+        let (params, grads) = (d.params.all(), d.grads.all());
+        if !ns.placed() || dynamic.split() == Some(0) {
+            // Nothing is blended: every gradient of the field is zero.
+            if !accumulate {
+                rec.fill(grads, 0);
+                if ns.placed() {
+                    rec.fill(ns.grad_block(), 0);
+                }
+            }
+            return;
+        }
+        let (rows, d_out, idx) = match dynamic.split() {
+            None => (g.n, self.output_grad(k), None),
+            Some(count) => {
+                let c = s.compact_d_out.as_ref().expect("a backward pass").all();
+                let width = row::DEFORM as u32;
+                let src = self.output_grad(k);
+                self.rows.gather(rec, count, width, dynamic.idx(), src, c);
+                (count, c, Some(dynamic.idx()))
+            }
+        };
+        self.ensure_pairs(rec, model, f, ns);
+        let x = self.blend_inputs(model, ns, k);
+        let (gm, gq) = (g.grad(Section::Means), g.grad(Section::Quats));
+        (f.kernels).record_lbs_bwd(rec, &f.bufs, rows, &x, idx, d_out, gm, gq);
+        let node_d = s.node_d_out.as_ref().expect("a backward pass").all();
+        (f.kernels).record_gather(rec, &f.bufs, ns.m, node_d, ns.grad_block(), accumulate);
+        self.mlp
+            .backward(rec, &s.mlp, ns.m, params, node_d, grads, accumulate);
     }
 
     fn slot(&self, k: Slot) -> &SlotBuffers {
@@ -112,6 +275,9 @@ impl DeformPass {
     /// the dynamic rows when the model is split (the static ones get their constant row),
     /// else over all.
     pub fn mlp_forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32) {
+        if model.nodes.is_some() {
+            return self.nodes_forward(rec, model, k, t);
+        }
         let (g, s, dynamic) = (&model.gaussians, self.slot(k), &model.dynamic);
         let means = g.param(Section::Means);
         let params = model.deform.params.all();
@@ -191,6 +357,9 @@ impl DeformPass {
     /// The MLP's weight gradients from slot `k`'s output gradient, written into the model's
     /// MLP gradient buffer or added to it (`accumulate`); over the dynamic rows when split.
     pub fn mlp_backward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, accumulate: bool) {
+        if model.nodes.is_some() {
+            return self.nodes_backward(rec, model, k, accumulate);
+        }
         let (d, s, dynamic) = (&model.deform, self.slot(k), &model.dynamic);
         let (params, grads) = (d.params.all(), d.grads.all());
         let (rows, d_out) = match dynamic.split() {

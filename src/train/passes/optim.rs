@@ -61,12 +61,12 @@ impl AdamPass {
         };
         let h = AdamHyper::default();
         self.adam.record_guarded(rec, bufs, &groups, &h, it, skip);
-        if let Some((lr, step)) = lr.deform {
+        if let Some((deform_lr, step)) = lr.deform {
             let d = &model.deform;
             let groups = [AdamGroup {
                 first: 0,
                 count: d.layout.total as u32,
-                lr: lr as f32,
+                lr: deform_lr as f32,
                 mask: None,
             }];
             let bufs = AdamBuffers {
@@ -76,6 +76,31 @@ impl AdamPass {
                 v: d.v.all(),
             };
             self.adam.record_guarded(rec, bufs, &groups, &h, step, skip);
+            if let Some(ns) = model.nodes.as_ref().filter(|n| n.placed()) {
+                // Positions at the Gaussian means' rate (same units), log-radii at their own.
+                let m = ns.m;
+                let groups = [
+                    AdamGroup {
+                        first: 0,
+                        count: 3 * m,
+                        lr: lr.means as f32,
+                        mask: None,
+                    },
+                    AdamGroup {
+                        first: 3 * m,
+                        count: m,
+                        lr: ns.cfg.radius_lr as f32,
+                        mask: None,
+                    },
+                ];
+                let bufs = AdamBuffers {
+                    params: ns.params.all(),
+                    grads: ns.grads.all(),
+                    m: ns.adam_m.all(),
+                    v: ns.adam_v.all(),
+                };
+                self.adam.record_guarded(rec, bufs, &groups, &h, step, skip);
+            }
         }
     }
 }

@@ -1,0 +1,57 @@
+// The blend of one Gaussian's K nearest node transforms (docs/nodes.md), shared by
+// nodes_lbs.comp and nodes_lbs_bwd.comp. Expects the bindings `nodes` (node parameters),
+// `node_out` ([M,10] T, dq, ds) and `knn`, and the push constants `pc`.
+
+// Per-slot state of one Gaussian's blend.
+struct Blend {
+    uint count;                 // valid slots (a prefix: NO_NODE slots come last)
+    uint node[NODES_KMAX];
+    vec3 v[NODES_KMAX];         // μ − p
+    float w[NODES_KMAX];        // normalised weights
+    float inv[NODES_KMAX];      // e^(−2ρ̃) = 1/σ²
+    bool clamped[NODES_KMAX];   // ρ outside [RHO_MIN, RHO_MAX]: no radius gradient
+    vec4 rn[NODES_KMAX];        // unit node rotation
+    float rlen[NODES_KMAX];     // |(1,0,0,0) + dq|
+    vec4 Q;                     // Σ w r̂
+};
+
+Blend blend_of(uint i, vec3 mu) {
+    Blend b;
+    b.count = 0;
+    float amax = -1.0 / 0.0;
+    float a[NODES_KMAX];
+    for (uint s = 0; s < pc.k; ++s) {
+        uint j = knn[i * pc.k + s];
+        if (j >= pc.m) break;
+        b.node[s] = j;
+        float rho = nodes[3 * pc.m + j];
+        b.clamped[s] = !(rho >= RHO_MIN && rho <= RHO_MAX);
+        b.inv[s] = exp(-2.0 * clamp(rho, RHO_MIN, RHO_MAX));
+        b.v[s] = mu - vec3(nodes[3 * j], nodes[3 * j + 1], nodes[3 * j + 2]);
+        a[s] = -0.5 * dot(b.v[s], b.v[s]) * b.inv[s];
+        amax = max(amax, a[s]);
+        vec4 r = vec4(1.0 + node_out[10 * j + 3], node_out[10 * j + 4], node_out[10 * j + 5],
+                      node_out[10 * j + 6]);
+        b.rn[s] = quat_normalize(r, b.rlen[s]);
+        b.count = s + 1;
+    }
+    float sum = 0.0;
+    for (uint s = 0; s < b.count; ++s) {
+        b.w[s] = exp(a[s] - amax);
+        sum += b.w[s];
+    }
+    b.Q = vec4(0.0);
+    for (uint s = 0; s < b.count; ++s) {
+        b.w[s] /= sum;
+        b.Q += b.w[s] * b.rn[s];
+    }
+    return b;
+}
+
+vec3 node_t(uint j) {
+    return vec3(node_out[10 * j], node_out[10 * j + 1], node_out[10 * j + 2]);
+}
+
+vec3 node_ds(uint j) {
+    return vec3(node_out[10 * j + 7], node_out[10 * j + 8], node_out[10 * j + 9]);
+}

@@ -1,0 +1,266 @@
+//! The control-node deformation field (`glsl/nodes/*.comp`, docs/nodes.md); CPU twin:
+//! `reference::nodes`. KNN of every Gaussian among the nodes, the blend of the nodes'
+//! transforms into per-Gaussian deformation rows, its backward into per-(Gaussian, slot)
+//! contributions, and the per-node gather of those (pairs sorted by node with the radix sort:
+//! deterministic, no float atomics).
+
+use bytemuck::{Pod, Zeroable};
+
+use super::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
+use super::scan::Count;
+use crate::error::{Error, Result};
+use crate::shaders;
+use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
+
+/// Nearest nodes per Gaussian at most (mirrors `NODES_KMAX` in glsl/nodes/nodes.glsl).
+pub const KMAX: u32 = 8;
+/// An empty KNN slot (mirrors `NO_NODE`).
+pub const NO_NODE: u32 = u32::MAX;
+/// Floats per contribution row (mirrors `CONTRIB`).
+pub const CONTRIB: u64 = 14;
+/// Clamp of the node log-radius (mirrors `RHO_MIN`/`RHO_MAX`).
+pub const RHO_MIN: f32 = -16.0;
+pub const RHO_MAX: f32 = 8.0;
+/// Nodes at most: one gather workgroup each within every device's 65 535 limit, and far more
+/// than a scene's motion needs (SC-GS uses 512–1024).
+pub const MAX_NODES: u32 = 16_384;
+
+/// Mirrors `NodesParams` in glsl/include/params.glsl (checked by tests/layout.rs).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct NodesParams {
+    pub n: u32,
+    pub m: u32,
+    pub k: u32,
+    pub flags: u32,
+}
+
+/// Significant key bits of the node sort: enough that `NO_NODE`'s low bits sort after every
+/// node index.
+pub fn key_bits(m: u32) -> u32 {
+    (32 - m.leading_zeros()).max(1)
+}
+
+/// Checks a node count and K; errors name the setting.
+pub fn check_shape(m: u32, k: u32) -> Result<()> {
+    if !(1..=MAX_NODES).contains(&m) {
+        return Err(Error::Invalid(format!(
+            "deform_field.nodes = {m}: expected 1..={MAX_NODES}"
+        )));
+    }
+    if !(1..=KMAX).contains(&k) {
+        return Err(Error::Invalid(format!(
+            "deform_field.knn = {k}: expected 1..={KMAX}"
+        )));
+    }
+    Ok(())
+}
+
+pub struct NodeKernels {
+    knn: ComputePipeline,
+    pairs: ComputePipeline,
+    ranges: ComputePipeline,
+    lbs: ComputePipeline,
+    lbs_bwd: ComputePipeline,
+    gather: ComputePipeline,
+    sort: RadixSort,
+}
+
+/// The backward's scratch for `capacity` Gaussians, `max_nodes` nodes and K slots, allocated
+/// once (the KNN itself is model state: `model::nodes::NodeState::knn`).
+pub struct NodeBuffers {
+    pub k: u32,
+    pub max_nodes: u32,
+    /// Pairs (node key, pair id), sorted by node by [`NodeKernels::record_pairs`].
+    pub sort: SortBuffers,
+    /// [max_nodes, 2] u32: each node's range in the sorted pairs.
+    pub ranges: Buffer,
+    /// [capacity, K, 14] f32 contribution rows of the backward.
+    pub contrib: Buffer,
+}
+
+/// One blend's inputs.
+#[derive(Clone, Copy)]
+pub struct BlendInputs<'a> {
+    pub m: u32,
+    pub k: u32,
+    /// [N,K] u32 nearest nodes.
+    pub knn: BufSlice<'a>,
+    /// Canonical means [N,3] and quaternions [N,4].
+    pub means: BufSlice<'a>,
+    pub quats: BufSlice<'a>,
+    /// Node parameters [4M] (positions, log-radii) and the MLP's output at the nodes [M,10].
+    pub nodes: BufSlice<'a>,
+    pub node_out: BufSlice<'a>,
+}
+
+impl NodeKernels {
+    pub fn new(gpu: &Gpu) -> Result<Self> {
+        use shaders::nodes as s;
+        Ok(NodeKernels {
+            knn: gpu.pipeline(&s::NODES_KNN)?,
+            pairs: gpu.pipeline(&s::NODES_PAIRS)?,
+            ranges: gpu.pipeline(&s::NODES_RANGES)?,
+            lbs: gpu.pipeline(&s::NODES_LBS)?,
+            lbs_bwd: gpu.pipeline(&s::NODES_LBS_BWD)?,
+            gather: gpu.pipeline(&s::NODES_GATHER)?,
+            sort: RadixSort::new(gpu)?,
+        })
+    }
+
+    pub fn buffers(&self, gpu: &Gpu, capacity: u32, max_nodes: u32, k: u32) -> Result<NodeBuffers> {
+        check_shape(max_nodes, k)?;
+        let pairs = capacity.max(1) as u64 * k as u64;
+        let pairs32 = u32::try_from(pairs).map_err(|_| Error::Capacity {
+            what: "node pairs (Gaussian budget × deform.knn)",
+            capacity: u32::MAX as u64,
+            asked: pairs,
+        })?;
+        Ok(NodeBuffers {
+            k,
+            max_nodes,
+            sort: self
+                .sort
+                .buffers(gpu, "node pairs", pairs32, KeyWidth::U32)?,
+            ranges: gpu.buffer("node ranges", max_nodes as u64 * 8)?,
+            contrib: gpu.buffer("node contributions", pairs * CONTRIB * 4)?,
+        })
+    }
+
+    /// KNN of the `n` Gaussians among the first `m` nodes into `knn` [n,k] (`row_of`: the
+    /// split model's rows; a static Gaussian gets no node).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_knn(
+        &self,
+        rec: &mut Recorder<'_>,
+        knn: BufSlice<'_>,
+        n: u32,
+        m: u32,
+        k: u32,
+        means: BufSlice<'_>,
+        nodes: BufSlice<'_>,
+        row_of: Option<BufSlice<'_>>,
+    ) {
+        let pc = NodesParams {
+            n,
+            m,
+            k,
+            flags: row_of.is_some() as u32,
+        };
+        let row_of = row_of.unwrap_or(means); // unread (flags 0)
+        rec.dispatch_rows(&self.knn, &pc, &[means, nodes, row_of, knn], n);
+    }
+
+    /// The pairs of `knn` [n,K] sorted by node and each node's range (for the gather).
+    pub fn record_pairs(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &NodeBuffers,
+        knn: BufSlice<'_>,
+        n: u32,
+        m: u32,
+    ) {
+        assert!(m <= b.max_nodes, "{m} nodes in buffers for {}", b.max_nodes);
+        let pairs = n * b.k;
+        let pc = NodesParams {
+            n: pairs,
+            m,
+            k: b.k,
+            flags: 0,
+        };
+        let binds = [knn, b.sort.keys[0].all(), b.sort.vals[0].all()];
+        rec.dispatch_rows(&self.pairs, &pc, &binds, pairs);
+        let out = self
+            .sort
+            .record(rec, &b.sort, Count::Host(pairs), key_bits(m));
+        rec.fill(b.ranges.all(), 0);
+        let binds = [b.sort.keys[out].all(), b.ranges.all()];
+        rec.dispatch_rows(&self.ranges, &pc, &binds, pairs);
+    }
+
+    /// Deformation rows [rows,10] of the Gaussians (all `rows` = N, or the dynamic rows
+    /// `idx[0..rows]` of a split model, written compactly).
+    pub fn record_lbs(
+        &self,
+        rec: &mut Recorder<'_>,
+        rows: u32,
+        x: &BlendInputs<'_>,
+        idx: Option<BufSlice<'_>>,
+        out: BufSlice<'_>,
+    ) {
+        let pc = NodesParams {
+            n: rows,
+            m: x.m,
+            k: x.k,
+            flags: idx.is_some() as u32,
+        };
+        let idx = idx.unwrap_or(x.knn); // unread (flags 0)
+        let binds = [x.means, x.quats, x.nodes, x.node_out, x.knn, idx, out];
+        rec.dispatch_rows(&self.lbs, &pc, &binds, rows);
+    }
+
+    /// Backward of [`Self::record_lbs`] from `d_out` [rows,10]: contribution rows, and the
+    /// canonical mean/quaternion gradients added into `g_means` [N,3], `g_quats` [N,4].
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_lbs_bwd(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &NodeBuffers,
+        rows: u32,
+        x: &BlendInputs<'_>,
+        idx: Option<BufSlice<'_>>,
+        d_out: BufSlice<'_>,
+        g_means: BufSlice<'_>,
+        g_quats: BufSlice<'_>,
+    ) {
+        assert_eq!(x.k, b.k, "blend and scratch for another K");
+        let pc = NodesParams {
+            n: rows,
+            m: x.m,
+            k: x.k,
+            flags: idx.is_some() as u32,
+        };
+        let idx = idx.unwrap_or(x.knn); // unread (flags 0)
+        let binds = [
+            x.means,
+            x.quats,
+            x.nodes,
+            x.node_out,
+            x.knn,
+            idx,
+            d_out,
+            b.contrib.all(),
+            g_means,
+            g_quats,
+        ];
+        rec.dispatch_rows(&self.lbs_bwd, &pc, &binds, rows);
+    }
+
+    /// Per-node sums of the contributions: `d_node_out` [M,10] written, node-parameter
+    /// gradients `g_nodes` [4M] written or added (`accumulate`).
+    pub fn record_gather(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &NodeBuffers,
+        m: u32,
+        d_node_out: BufSlice<'_>,
+        g_nodes: BufSlice<'_>,
+        accumulate: bool,
+    ) {
+        let pc = NodesParams {
+            n: 0,
+            m,
+            k: b.k,
+            flags: accumulate as u32,
+        };
+        let sorted = (passes(key_bits(m)) % 2) as usize;
+        let binds = [
+            b.ranges.all(),
+            b.sort.vals[sorted].all(),
+            b.contrib.all(),
+            d_node_out,
+            g_nodes,
+        ];
+        rec.dispatch(&self.gather, &pc, &binds, [m, 1, 1]);
+    }
+}
