@@ -22,6 +22,7 @@ mod mlp_case;
 pub mod mlp_table;
 pub mod motion;
 pub mod raster_scenes;
+pub mod field;
 pub mod sparsity;
 pub mod step;
 
@@ -406,6 +407,9 @@ pub enum Suite {
     /// The training step with the MLP over every Gaussian against split models (50, 20, 5,
     /// 0 % dynamic), per zone.
     Sparsity,
+    /// The training step with the per-Gaussian MLP against the control-node field (256, 512,
+    /// 1024 nodes), at --field-gaussians Gaussians, per zone.
+    Field,
     /// The DispFlow step with each scene-motion option (flow preset, level, blur, texture,
     /// residual, confidence) next to the baseline step, per zone.
     Motion,
@@ -436,6 +440,10 @@ pub struct BenchArgs {
     /// Step: timed steps per kernel set (the table reports the median).
     #[arg(long, default_value_t = 5)]
     pub steps: u32,
+    /// Field: Gaussians of each scene's model (its points grown by jittered copies; 0 = the
+    /// initial points) — a trained fast-preset run of mujoco-scene7 holds about 20 000.
+    #[arg(long, default_value_t = 20_000)]
+    pub field_gaussians: u32,
     /// Sort/scan sizes as powers of two (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "16,18,20,22")]
     pub log2_sizes: Vec<u32>,
@@ -602,6 +610,10 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
     }
     if has(Suite::Sparsity) {
         let st = sparsity::run_sparsity_bench(&gpu, args.warm_steps, args.steps)?;
+        rows.extend(step::report(&gpu, &st, args.reps)?);
+    }
+    if has(Suite::Field) {
+        let st = field::run_field_bench(&gpu, args.warm_steps, args.steps, args.field_gaussians)?;
         rows.extend(step::report(&gpu, &st, args.reps)?);
     }
     if has(Suite::Motion) {
