@@ -17,12 +17,12 @@ use crate::reference;
 use crate::testing::Noise;
 use crate::vk::{Buffer, Gpu, Recorder, Timings};
 
+pub mod field;
 mod lpips_case;
 mod mlp_case;
 pub mod mlp_table;
 pub mod motion;
 pub mod raster_scenes;
-pub mod field;
 pub mod sparsity;
 pub mod step;
 

@@ -1,13 +1,15 @@
 //! The whole-step CPU twin (`reference::step`, one DispFlow-GS step in direct order) against
 //! central finite differences of its own f64 loss, for parameters of every group (canonical
 //! means, log-scales, quaternions, opacity logits, SH DC and rest, MLP time net / trunk /
-//! head), and the detached-statistics variant against the full gradient.
+//! head; and with the control-node field, node positions and log-radii), and the
+//! detached-statistics variant against the full gradient.
 
 use dispflow_vk::model::deform::{MlpConfig, MlpLayout, TimeEncoding, OUT_DIMS};
 use dispflow_vk::model::gaussians::HostGaussians;
+use dispflow_vk::reference::nodes::nodes_knn;
 use dispflow_vk::reference::raster::Camera;
 use dispflow_vk::reference::step::{
-    dispflow_step, step_loss_f64, NormGradMode, StepInputs, StepOutputs, StepParams64,
+    dispflow_step, step_loss_f64, NormGradMode, StepInputs, StepNodes, StepOutputs, StepParams64,
 };
 use dispflow_vk::testing::{rot_from_angles, Noise};
 
@@ -25,7 +27,12 @@ struct Scene {
     camera: Camera,
     target: Vec<[f32; 4]>,
     scene_motion: Vec<[f32; 2]>,
+    /// The control-node field: node parameters [4M] and the KNN [N·NODE_K].
+    nodes: Option<(Vec<f32>, Vec<u32>)>,
 }
+
+/// Nearest nodes per Gaussian in the node scenes.
+const NODE_K: usize = 3;
 
 const W: u32 = 24;
 const H: u32 = 20;
@@ -165,7 +172,21 @@ fn scene(seed: u64, n: usize) -> Scene {
         camera,
         target,
         scene_motion,
+        nodes: None,
     }
+}
+
+/// [`scene`] deformed through `m` control nodes placed at the first `m` Gaussians' means
+/// (radius 0.8: several nodes weigh on each Gaussian), each Gaussian blending its
+/// [`NODE_K`] nearest.
+fn node_scene(seed: u64, n: usize, m: usize) -> Scene {
+    let mut s = scene(seed, n);
+    let pos: Vec<[f32; 3]> = s.gaussians.means[..m].to_vec();
+    let mut params: Vec<f32> = pos.iter().flatten().copied().collect();
+    params.extend((0..m).map(|j| (0.8f32 + 0.05 * j as f32).ln()));
+    let knn = nodes_knn(&s.gaussians.means, &pos, NODE_K, None);
+    s.nodes = Some((params, knn));
+    s
 }
 
 impl Scene {
@@ -185,6 +206,11 @@ impl Scene {
             lambda_ssim: 0.2,
             motion_weight,
             norm_grad,
+            nodes: self.nodes.as_ref().map(|(params, knn)| StepNodes {
+                params,
+                knn,
+                k: NODE_K,
+            }),
         }
     }
 }
@@ -202,6 +228,8 @@ enum Group {
     ShRest,
     /// MLP parameters of one Linear (index into `layout.linears`).
     Mlp(usize),
+    /// Control-node parameters (index into [4M]: positions, then log-radii).
+    Nodes,
 }
 
 /// One scalar parameter: its group and flat index within the group's array (Gaussian arrays
@@ -219,6 +247,7 @@ fn slot(p: &mut StepParams64, Param(g, j): Param) -> &mut f64 {
         Group::ShDc => &mut c.sh_dc[j / 3][j % 3],
         Group::ShRest => &mut c.sh_rest[j],
         Group::Mlp(_) => &mut p.mlp[j],
+        Group::Nodes => &mut p.nodes[j],
     }
 }
 
@@ -232,6 +261,7 @@ fn analytic(o: &StepOutputs, Param(g, j): Param) -> f64 {
         Group::ShDc => d.sh_dc[j / 3][j % 3],
         Group::ShRest => d.sh_rest[j],
         Group::Mlp(_) => o.d_mlp[j],
+        Group::Nodes => o.d_nodes[j],
     }
 }
 
@@ -260,6 +290,9 @@ fn params_to_check(s: &Scene, ids: &[usize]) -> Vec<Param> {
                 l.b_off + r.next_u32() as usize % l.fan_out,
             ));
         }
+    }
+    if let Some((params, _)) = &s.nodes {
+        v.extend((0..params.len()).map(|j| Param(Group::Nodes, j)));
     }
     v
 }
@@ -291,7 +324,17 @@ fn group_name(s: &Scene, g: Group) -> String {
 /// the loss signature) straddles a kink where FD means nothing: it is skipped and counted.
 #[test]
 fn twin_step_matches_finite_differences() {
-    let s = scene(5, 40);
+    fd_check(&scene(5, 40));
+}
+
+/// The same through the control-node field: the blend's gradients reach the canonical means
+/// and rotations (not detached there), the node positions and radii, and the MLP at the nodes.
+#[test]
+fn twin_step_with_nodes_matches_finite_differences() {
+    fd_check(&node_scene(5, 40, 6));
+}
+
+fn fd_check(s: &Scene) {
     let inp = s.inputs(0.5, NormGradMode::Full);
     let out = dispflow_step(&inp);
     assert!(!out.motion_skipped, "motion term skipped");
@@ -320,7 +363,7 @@ fn twin_step_matches_finite_differences() {
     // mistake in δ's backward or in the t2 pass): its share of each checked Linear is large.
     let photo_only = dispflow_step(&s.inputs(0.0, NormGradMode::Full));
     let ids = [0, 9, 17, 26, 35];
-    let params = params_to_check(&s, &ids);
+    let params = params_to_check(s, &ids);
     for &i in &ids {
         assert!(
             out.d_gaussians.opacity[i].abs() > 1e-5,
@@ -557,7 +600,8 @@ mod gpu_step {
     use dispflow_vk::train::step::{record_step, StepPasses};
     use dispflow_vk::vk::{Gpu, Recorder};
 
-    use super::{scene, small_mlp, Scene, H, T1, T2, W};
+    use super::{node_scene, scene, small_mlp, Scene, H, NODE_K, T1, T2, W};
+    use dispflow_vk::model::nodes::{FieldConfig, FieldKind, NodeSnapshot, NodeState};
 
     /// Gradients of one GPU step, per group, flattened like the twin's.
     struct GpuGrads {
@@ -577,11 +621,17 @@ mod gpu_step {
         let deform = DeformState::new(gpu, small_mlp(), 0, false).unwrap();
         assert_eq!(deform.layout, s.layout);
         gpu.upload(deform.params.all(), &s.mlp_params).unwrap();
+        let field = s.nodes.as_ref().map(|(params, _)| FieldConfig {
+            kind: FieldKind::Nodes,
+            nodes: params.len() as u32 / 4,
+            knn: NODE_K as u32,
+            ..FieldConfig::default()
+        });
         let mut model = Model {
             gaussians: GaussianState::new(gpu, cap, s.sh_degree, &s.gaussians).unwrap(),
             deform,
             dynamic: DynamicSet::new(gpu, cap).unwrap(),
-            nodes: None,
+            nodes: field.map(|f| NodeState::new(gpu, f, cap).unwrap()),
         };
         if split {
             let all = SplitSnapshot {
@@ -589,6 +639,19 @@ mod gpu_step {
                 fixed: vec![0.0; 10 * cap as usize],
             };
             model.dynamic.upload(gpu, Some(&all)).unwrap();
+        }
+        if let (Some(ns), Some((params, knn))) = (model.nodes.as_mut(), &s.nodes) {
+            // The twin's KNN, taken as current (no recomputation inside the step).
+            let zeros = vec![0.0; params.len()];
+            let snap = NodeSnapshot {
+                params: params.clone(),
+                m: zeros.clone(),
+                v: zeros,
+                knn: knn.clone(),
+            };
+            ns.restore(gpu, &snap, cap, model.dynamic.generation())
+                .unwrap();
+            testing::fill_noise(gpu, &ns.grads, 8);
         }
         for b in [&model.gaussians.grads, &model.deform.grads] {
             testing::fill_noise(gpu, b, 7);
@@ -615,7 +678,7 @@ mod gpu_step {
         };
         let cfg = &model.deform.cfg;
         let mut passes = StepPasses {
-            deform: DeformPass::new(gpu, cfg, None, &sizes, 2, true).unwrap(),
+            deform: DeformPass::new(gpu, cfg, field.as_ref(), &sizes, 2, true).unwrap(),
             render: RenderPass::new(raster.clone(), gpu, &sizes, 3).unwrap(),
             loss: PhotoLoss::new(gpu, &sizes).unwrap(),
             motion: Some(
@@ -705,16 +768,21 @@ mod gpu_step {
                 (l.w_off..l.w_off + l.fan_in * l.fan_out).chain(l.b_off..l.b_off + l.fan_out)
             })
             .collect();
+        let mut groups = vec![
+            ("means", read(Section::Means)),
+            ("log_scales", read(Section::LogScales)),
+            ("quats", read(Section::Quats)),
+            ("opacity", read(Section::Opacity)),
+            ("sh_dc", read(Section::ShDc)),
+            ("sh_rest", read(Section::ShRest)),
+            ("mlp", used.iter().map(|&i| mlp[i] as f64).collect()),
+        ];
+        if let Some(ns) = &model.nodes {
+            let v: Vec<f32> = gpu.read(ns.grad_block()).unwrap();
+            groups.push(("nodes", v.iter().map(|&x| x as f64).collect()));
+        }
         GpuGrads {
-            groups: vec![
-                ("means", read(Section::Means)),
-                ("log_scales", read(Section::LogScales)),
-                ("quats", read(Section::Quats)),
-                ("opacity", read(Section::Opacity)),
-                ("sh_dc", read(Section::ShDc)),
-                ("sh_rest", read(Section::ShRest)),
-                ("mlp", used.iter().map(|&i| mlp[i] as f64).collect()),
-            ],
+            groups,
             photo_loss: passes.loss.values().loss,
         }
     }
@@ -724,7 +792,7 @@ mod gpu_step {
         let used = s.layout.linears.iter().flat_map(|l| {
             (l.w_off..l.w_off + l.fan_in * l.fan_out).chain(l.b_off..l.b_off + l.fan_out)
         });
-        vec![
+        let mut v = vec![
             ("means", g.means.as_flattened().to_vec()),
             ("log_scales", g.log_scales.as_flattened().to_vec()),
             ("quats", g.quats.as_flattened().to_vec()),
@@ -732,7 +800,11 @@ mod gpu_step {
             ("sh_dc", g.sh_dc.as_flattened().to_vec()),
             ("sh_rest", g.sh_rest.clone()),
             ("mlp", used.map(|i| o.d_mlp[i]).collect()),
-        ]
+        ];
+        if s.nodes.is_some() {
+            v.push(("nodes", o.d_nodes.clone()));
+        }
+        v
     }
 
     /// max |gpu − twin| relative to the group's largest twin gradient, per group.
@@ -759,13 +831,23 @@ mod gpu_step {
     /// the composition of the CPU twins, per parameter group.
     #[test]
     fn gpu_step_matches_the_twin_composition() {
+        compare_with_twin(&scene(5, 40), &[(0.5, false), (0.0, false), (0.5, true)]);
+    }
+
+    /// The same step through the control-node field (dense and split): the MLP at 6 nodes,
+    /// the blend, its backward into canonical means/rotations and node parameters, the gather.
+    #[test]
+    fn gpu_step_with_nodes_matches_the_twin_composition() {
+        compare_with_twin(&node_scene(5, 40, 6), &[(0.5, false), (0.5, true)]);
+    }
+
+    fn compare_with_twin(s: &Scene, cases: &[(f32, bool)]) {
         let gpu = testing::gpu();
-        let s = scene(5, 40);
-        for (weight, split) in [(0.5f32, false), (0.0, false), (0.5, true)] {
+        for &(weight, split) in cases {
             let twin = dispflow_step(&s.inputs(weight, NormGradMode::Detached));
             assert!(weight == 0.0 || !twin.motion_skipped);
-            let got = run_gpu_step(&gpu, &s, weight, split);
-            let errs = rel_errors(&got, &twin_groups(&s, &twin));
+            let got = run_gpu_step(&gpu, s, weight, split);
+            let errs = rel_errors(&got, &twin_groups(s, &twin));
             eprintln!("α = {weight}, split {split}: photo loss GPU {:.6} twin {:.6}; max |Δ| / max |twin| per group: {errs:?}", got.photo_loss, twin.photo_loss);
             assert!((got.photo_loss - twin.photo_loss).abs() < 1e-5 * twin.photo_loss.max(1.0));
             // f32 on the GPU (float atomics in blend backward, f32 MLP) against f64: 1e-3 of
@@ -778,9 +860,9 @@ mod gpu_step {
             }
         }
         // The motion term is not a no-op: its gradients change every group the test compares.
-        let with = twin_groups(&s, &dispflow_step(&s.inputs(0.5, NormGradMode::Detached)));
-        let without = twin_groups(&s, &dispflow_step(&s.inputs(0.0, NormGradMode::Detached)));
-        let gpu_with = run_gpu_step(&gpu, &s, 0.5, false);
+        let with = twin_groups(s, &dispflow_step(&s.inputs(0.5, NormGradMode::Detached)));
+        let without = twin_groups(s, &dispflow_step(&s.inputs(0.0, NormGradMode::Detached)));
+        let gpu_with = run_gpu_step(&gpu, s, 0.5, false);
         for (((name, a), (_, b)), (_, g)) in with.iter().zip(&without).zip(&gpu_with.groups) {
             let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             let diff = a

@@ -45,7 +45,10 @@ fn nodes_field_trains_resumes_bit_exactly_and_is_refused_by_the_mlp_field() {
 
     let mut a = Trainer::new(&gpu, &cfg, &ds).unwrap();
     run_to(&mut a, 20);
-    assert!(!a.model.nodes.as_ref().unwrap().placed(), "warm-up: no node yet");
+    assert!(
+        !a.model.nodes.as_ref().unwrap().placed(),
+        "warm-up: no node yet"
+    );
     run_to(&mut a, 21);
     let placed = a.checkpoint().unwrap().model.nodes.expect("placed at 21");
     assert_eq!(placed.params.len(), 4 * 24);
@@ -73,7 +76,10 @@ fn nodes_field_trains_resumes_bit_exactly_and_is_refused_by_the_mlp_field() {
     b.checkpoint().unwrap().save(&path).unwrap();
     drop(b);
     let loaded = Checkpoint::load(&path).unwrap();
-    let (knn, n) = (&loaded.model.nodes.as_ref().unwrap().knn, loaded.model.gaussians.len());
+    let (knn, n) = (
+        &loaded.model.nodes.as_ref().unwrap().knn,
+        loaded.model.gaussians.len(),
+    );
     assert_eq!(knn.len(), 4 * n, "the KNN of iteration 30 is saved");
     assert!(knn.iter().all(|&j| j < 24 || j == u32::MAX));
     assert!(knn.iter().any(|&j| j != u32::MAX));

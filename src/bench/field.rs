@@ -32,12 +32,15 @@ pub fn grown(g: &HostGaussians, n: usize) -> HostGaussians {
     if len == 0 {
         return out;
     }
-    let (lo, hi) = g.means.iter().fold(([f32::MAX; 3], [f32::MIN; 3]), |(lo, hi), m| {
-        (
-            std::array::from_fn(|a| lo[a].min(m[a])),
-            std::array::from_fn(|a| hi[a].max(m[a])),
-        )
-    });
+    let (lo, hi) = g
+        .means
+        .iter()
+        .fold(([f32::MAX; 3], [f32::MIN; 3]), |(lo, hi), m| {
+            (
+                std::array::from_fn(|a| lo[a].min(m[a])),
+                std::array::from_fn(|a| hi[a].max(m[a])),
+            )
+        });
     let rest = g.sh_rest.len() / len;
     for i in len..n {
         let s = i % len;

@@ -28,6 +28,13 @@
 //! 10. [`dispflow::displacement_bwd`]: `∂out_t1.dx −= ∂δ`, `∂out_t2.dx = ∂δ`.
 //! 11. [`mlp::backward`] at t1 plus at t2 → `d_mlp`.
 //!
+//! With the control-node field ([`StepNodes`], docs/nodes.md) step 1 runs the MLP at the node
+//! positions (detached) and blends each Gaussian's deformation from its K nearest nodes
+//! ([`nodes::nodes_lbs`], the KNN held fixed); step 11 first takes each deformation row's
+//! gradient back through the blend ([`nodes::nodes_lbs_bwd`]: canonical means and rotations,
+//! node positions and log-radii) and gathers it per node ([`nodes::nodes_gather`]) before the
+//! MLP backward at the nodes.
+//!
 //! Everything is f64 from the f32 inputs on (no intermediate rounding); the only f32
 //! computation is the rasteriser's tile rectangle, which follows the GPU bit for bit.
 //!
@@ -42,7 +49,7 @@ use crate::kernels::motion::{NormFlag, NormMode, DEFAULT_EPS};
 use crate::model::deform::{MlpLayout, OUT_DIMS};
 use crate::model::gaussians::HostGaussians;
 use crate::reference::raster::{self, BlendOut64, BlendParams, Camera, Gaussians64, Projected64};
-use crate::reference::{deform, dispflow, loss, mlp, motion};
+use crate::reference::{deform, dispflow, loss, mlp, motion, nodes};
 
 /// Flatness threshold of the motion normalisation (the trainer's `NormConfig` eps, 1e-6 as f32).
 pub const MOTION_EPS: f64 = DEFAULT_EPS as f64;
@@ -82,6 +89,17 @@ pub struct StepInputs<'a> {
     /// α of the motion term (0: photometric loss only).
     pub motion_weight: f32,
     pub norm_grad: NormGradMode,
+    /// The control-node field; `None`: the MLP at every Gaussian.
+    pub nodes: Option<StepNodes<'a>>,
+}
+
+/// The control-node field of a step: node parameters `[4M]` (positions, log-radii) and every
+/// Gaussian's K nearest nodes `[N·K]` (`NO_NODE`-padded), held fixed.
+#[derive(Clone, Copy, Debug)]
+pub struct StepNodes<'a> {
+    pub params: &'a [f32],
+    pub knn: &'a [u32],
+    pub k: usize,
 }
 
 /// f64 counterpart of [`HostGaussians`]: the canonical parameters (an unrounded copy for
@@ -153,6 +171,8 @@ impl Canonical64 {
 pub struct StepParams64 {
     pub gaussians: Canonical64,
     pub mlp: Vec<f64>,
+    /// Node parameters `[4M]` (empty without the node field).
+    pub nodes: Vec<f64>,
 }
 
 impl StepParams64 {
@@ -161,6 +181,9 @@ impl StepParams64 {
         StepParams64 {
             gaussians: Canonical64::from_host(inp.gaussians),
             mlp: inp.mlp_params.iter().map(|&x| x as f64).collect(),
+            nodes: inp
+                .nodes
+                .map_or(Vec::new(), |n| n.params.iter().map(|&x| x as f64).collect()),
         }
     }
 }
@@ -179,6 +202,8 @@ pub struct StepOutputs {
     pub d_gaussians: Canonical64,
     /// ∂L/∂ every MLP parameter (`mlp.total` floats; padding 0).
     pub d_mlp: Vec<f64>,
+    /// ∂L/∂ node parameters `[4M]` (empty without the node field).
+    pub d_nodes: Vec<f64>,
     /// `[N]`: drawn means at t1 (also the SH view-direction points).
     pub drawn_means: Vec<[f64; 3]>,
     /// `[N]`: δ = dx(t2) − dx(t1).
@@ -284,8 +309,12 @@ fn forward(inp: &StepInputs<'_>, p: &StepParams64, view_means: Option<&[[f64; 3]
     );
     let mut sig = std::collections::hash_map::DefaultHasher::new();
 
-    // 1. D(x, t1), D(x, t2); x = the f32 canonical means of the inputs (detached).
-    let xyz: Vec<f32> = inp.gaussians.means.iter().flatten().copied().collect();
+    // 1. D(x, t1), D(x, t2); x = the f32 canonical means of the inputs (detached), or the
+    //    node positions and then the blend.
+    let xyz: Vec<f32> = match inp.nodes {
+        None => inp.gaussians.means.iter().flatten().copied().collect(),
+        Some(nd) => nd.params[..3 * (nd.params.len() / 4)].to_vec(),
+    };
     let act_t1 = mlp::forward_f64(inp.mlp, &p.mlp, &xyz, mlp::Times::Batch(inp.t1));
     let act_t2 = mlp::forward_f64(inp.mlp, &p.mlp, &xyz, mlp::Times::Batch(inp.t2));
     for a in [&act_t1, &act_t2] {
@@ -293,8 +322,22 @@ fn forward(inp: &StepInputs<'_>, p: &StepParams64, view_means: Option<&[[f64; 3]
             (*v > 0.0).hash(&mut sig);
         }
     }
+    let (out_t1, out_t2) = match inp.nodes {
+        None => (act_t1.out.clone(), act_t2.out.clone()),
+        Some(nd) => {
+            let blend = |act: &mlp::Activations| -> Vec<f64> {
+                (0..n)
+                    .flat_map(|i| {
+                        let slots = node_slots(nd, &p.nodes, &act.out, i);
+                        nodes::nodes_lbs(g.means[i], g.quats[i], &slots)
+                    })
+                    .collect()
+            };
+            (blend(&act_t1), blend(&act_t2))
+        }
+    };
     // 2. δ.
-    let delta = dispflow::displacement(&act_t1.out, &act_t2.out);
+    let delta = dispflow::displacement(&out_t1, &out_t2);
     // 3. Drawn Gaussians at t1.
     let mut drawn = Gaussians64 {
         means: Vec::with_capacity(n),
@@ -306,9 +349,7 @@ fn forward(inp: &StepInputs<'_>, p: &StepParams64, view_means: Option<&[[f64; 3]
         sh_degree: inp.sh_degree,
     };
     for i in 0..n {
-        let d: &[f64; OUT_DIMS] = act_t1.out[i * OUT_DIMS..(i + 1) * OUT_DIMS]
-            .try_into()
-            .unwrap();
+        let d: &[f64; OUT_DIMS] = out_t1[i * OUT_DIMS..(i + 1) * OUT_DIMS].try_into().unwrap();
         let (m, s, q) = deform::deform_apply(g.means[i], g.log_scales[i], g.quats[i], Some(d));
         drawn.means.push(m);
         drawn.scales.push(s);
@@ -469,7 +510,31 @@ pub fn dispflow_step(inp: &StepInputs<'_>) -> StepOutputs {
     // 10. δ backward into both MLP passes.
     let (d_out_t1, d_out_t2) = dispflow::displacement_bwd(&bg.features, &d_out_t1);
 
-    // 11. MLP backward at t1 and t2, summed.
+    // 11. (Through the blend and the per-node gather, then) MLP backward at t1 and t2, summed.
+    let mut d_nodes = vec![0.0; p.nodes.len()];
+    let mut at_nodes = |act: &mlp::Activations, d_out: Vec<f64>| -> Vec<f64> {
+        let Some(nd) = inp.nodes else {
+            return d_out;
+        };
+        let m = p.nodes.len() / 4;
+        let mut contrib = vec![[0.0; 14]; n * nd.k];
+        for i in 0..n {
+            let slots = node_slots(nd, &p.nodes, &act.out, i);
+            let up: [f64; OUT_DIMS] = d_out[i * OUT_DIMS..(i + 1) * OUT_DIMS].try_into().unwrap();
+            let (gm, gq, rows) = nodes::nodes_lbs_bwd(g.means[i], g.quats[i], &slots, up);
+            (0..3).for_each(|a| d.means[i][a] += gm[a]);
+            (0..4).for_each(|a| d.quats[i][a] += gq[a]);
+            contrib[i * nd.k..i * nd.k + rows.len()].copy_from_slice(&rows);
+        }
+        let (d_out_nodes, d_params) = nodes::nodes_gather(nd.knn, &contrib, m);
+        for (j, r) in d_params.iter().enumerate() {
+            (0..3).for_each(|a| d_nodes[3 * j + a] += r[a]);
+            d_nodes[3 * m + j] += r[3];
+        }
+        d_out_nodes.into_iter().flatten().collect()
+    };
+    let d_out_t1 = at_nodes(&f.act_t1, d_out_t1);
+    let d_out_t2 = at_nodes(&f.act_t2, d_out_t2);
     let mut d_mlp = mlp::backward(inp.mlp, &p.mlp, &f.act_t1, &d_out_t1);
     let d2 = mlp::backward(inp.mlp, &p.mlp, &f.act_t2, &d_out_t2);
     d_mlp.iter_mut().zip(&d2).for_each(|(a, b)| *a += b);
@@ -481,6 +546,7 @@ pub fn dispflow_step(inp: &StepInputs<'_>) -> StepOutputs {
         motion_skipped: f.skipped,
         d_gaussians: d,
         d_mlp,
+        d_nodes,
         drawn_means: f.drawn.means.clone(),
         delta: v3(&f.delta),
         rgb: f.out.rgb,
@@ -490,4 +556,22 @@ pub fn dispflow_step(inp: &StepInputs<'_>) -> StepOutputs {
         d_disp_flow,
         d_delta: v3(&bg.features),
     }
+}
+
+/// The twin blend's slots of Gaussian `i`: its KNN row with the f64 node parameters `params`
+/// `[4M]` and the node MLP outputs `out` `[M·10]`.
+fn node_slots(nd: StepNodes<'_>, params: &[f64], out: &[f64], i: usize) -> Vec<nodes::Slot> {
+    let m = params.len() / 4;
+    nd.knn[i * nd.k..(i + 1) * nd.k]
+        .iter()
+        .take_while(|&&j| j != nodes::NO_NODE)
+        .map(|&j| {
+            let j = j as usize;
+            nodes::Slot {
+                p: [params[3 * j], params[3 * j + 1], params[3 * j + 2]],
+                rho: params[3 * m + j],
+                out: out[j * OUT_DIMS..(j + 1) * OUT_DIMS].try_into().unwrap(),
+            }
+        })
+        .collect()
 }
