@@ -376,3 +376,49 @@ fn look_at_gives_an_upright_opencv_pose() {
     // A point above the target is above the image centre (OpenCV: smaller y).
     assert!(to_cam(target + up).y < 0.0);
 }
+
+/// A run of the control-node field exports its nodes (`nodes.bin`) and evaluates to exactly
+/// the numbers training reported; a truncated `nodes.bin` is refused by name.
+#[test]
+fn a_nodes_run_evaluates_to_its_training_numbers() {
+    testing::validate_command_devices();
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tiny_scene(tmp.path());
+    let out = tmp.path().join("nodes");
+    let cfg = out.with_extension("toml");
+    std::fs::write(&cfg, tiny_toml(60)).unwrap();
+    let a = TrainArgs {
+        data: Some(data.clone()),
+        out: Some(out.clone()),
+        config: Some(cfg),
+        motion_weight: Some(0.1),
+        deform_field: Some(dispflow_vk::model::nodes::FieldKind::Nodes),
+        nodes: Some(16),
+        ..TrainArgs::default()
+    };
+    dispflow_vk::train::cli::run(&a).unwrap();
+    let nodes = std::fs::read(out.join("nodes.bin")).unwrap();
+    assert_eq!(nodes.len(), 16 * 16, "16 nodes × (position, log-radius)");
+    let reports = run_eval(&eval_args(vec![out.clone()])).unwrap();
+    assert_eq!(reports.len(), 1);
+    let read = |p: PathBuf| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let (e, t) = (
+        read(out.join("eval/metrics.json")),
+        read(out.join("metrics.json")),
+    );
+    for k in ["psnr", "ssim", "mmap", "drc"] {
+        let (a, b) = (e[k].as_f64().unwrap(), t[k].as_f64().unwrap());
+        assert!((a - b).abs() < 1e-3, "{k}: eval {a} vs train {b}");
+    }
+    std::fs::write(out.join("nodes.bin"), &nodes[..7]).unwrap();
+    let err = match open_run(&out, None) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a truncated nodes.bin loaded"),
+    };
+    assert!(
+        err.contains("nodes.bin") && err.contains("16 per control node"),
+        "{err}"
+    );
+}

@@ -356,3 +356,4 @@ fn extremes_stay_finite() {
         "a NaN mean has no node: D = 0"
     );
 }
+dispflow_vk::subgroup_reruns!();

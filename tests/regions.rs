@@ -149,6 +149,8 @@ fn displacement_epe_probe_matches_its_twin() {
     let mut cfg = tiny_config(20);
     cfg.warm_up = 0;
     cfg.zero_deform_head = false;
+    // The twin blends the MLP's per-Gaussian output (nodes are only placed by a step).
+    cfg.deform_field.kind = dispflow_vk::model::nodes::FieldKind::Mlp;
     let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
     assert!(tr.view().deform_active);
     let mut checked = 0;

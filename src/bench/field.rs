@@ -70,6 +70,7 @@ pub fn run_field_bench(gpu: &Gpu, warm: u32, steps: u32, gaussians: u32) -> Resu
             let mut trainers = Vec::new();
             for (_, nodes) in FIELDS {
                 let mut c = cfg.clone();
+                c.deform_field.kind = FieldKind::Mlp;
                 if let Some(m) = nodes {
                     c.deform_field.kind = FieldKind::Nodes;
                     c.deform_field.nodes = m;

@@ -182,16 +182,6 @@ impl Checkpoint {
             .into_iter()
             .map(|b| (b.name, b.data))
             .collect();
-        for (k, v) in DENSIFY_STATS.iter().zip(&self.densify_stats) {
-            blobs.push((k.to_string(), v));
-        }
-        // Flags as 0.0/1.0 (every blob is f32); absent while the model is dense.
-        let dynamic: Option<Vec<f32>> =
-            (self.model.dynamic.as_ref()).map(|d| d.flags.iter().map(|&v| v as f32).collect());
-        if let (Some(f), Some(d)) = (&dynamic, &self.model.dynamic) {
-            blobs.push(("dynamic".to_string(), f));
-            blobs.push(("dynamic_fixed".to_string(), &d.fixed));
-        }
         // Node indices as f32 (exact below 2^24), an empty slot as −1.
         let knn: Option<Vec<f32>> = (self.model.nodes.as_ref())
             .filter(|n| !n.knn.is_empty())
@@ -201,6 +191,16 @@ impl Checkpoint {
             });
         if let Some(k) = &knn {
             blobs.push(("node_knn".to_string(), k));
+        }
+        for (k, v) in DENSIFY_STATS.iter().zip(&self.densify_stats) {
+            blobs.push((k.to_string(), v));
+        }
+        // Flags as 0.0/1.0 (every blob is f32); absent while the model is dense.
+        let dynamic: Option<Vec<f32>> =
+            (self.model.dynamic.as_ref()).map(|d| d.flags.iter().map(|&v| v as f32).collect());
+        if let (Some(f), Some(d)) = (&dynamic, &self.model.dynamic) {
+            blobs.push(("dynamic".to_string(), f));
+            blobs.push(("dynamic_fixed".to_string(), &d.fixed));
         }
         let header = Header {
             version: CHECKPOINT_VERSION,

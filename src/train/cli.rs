@@ -55,7 +55,8 @@ pub struct TrainArgs {
     /// Deformation field: mlp (Deformable-3DGS: the MLP at every Gaussian) or nodes (SC-GS:
     /// the MLP at --nodes control nodes placed by farthest-point sampling when the deformation
     /// starts, each Gaussian blending its --knn nearest nodes' rigid transforms; the MLP's
-    /// cost then follows the node count, not the Gaussian count) [default: mlp].
+    /// cost then follows the node count, not the Gaussian count) [preset: paper mlp, fast
+    /// nodes].
     #[arg(long, value_enum)]
     pub deform_field: Option<crate::model::nodes::FieldKind>,
     /// Control nodes of the nodes field [default: 512].

@@ -516,6 +516,12 @@ impl TrainConfig {
                 level: 1,
                 ..SceneMotionConfig::default()
             },
+            // Issue 28's note: the step 2.8× (built-in) to 3.5× (mujoco-scene7) faster at the
+            // same test PSNR at equal iterations, +1.6 dB at equal training time.
+            deform_field: crate::model::nodes::FieldConfig {
+                kind: crate::model::nodes::FieldKind::Nodes,
+                ..Default::default()
+            },
             ..TrainConfig::paper()
         }
     }
