@@ -400,7 +400,7 @@ fn fd_check(s: &Scene) {
         assert!(
             (an - fd).abs() <= 1e-6 * fd.abs() + 1e-8,
             "{} [{}]: analytic {an:e}, finite difference {fd:e}",
-            group_name(&s, p.0),
+            group_name(s, p.0),
             p.1
         );
         worst[k].1 = worst[k].1.max((an - fd).abs() / fd.abs().max(1e-6));
@@ -415,14 +415,10 @@ fn fd_check(s: &Scene) {
             .fold(0.0, f64::max);
         eprintln!(
             "{:>16}: {checked} checked, {skip} skipped, max |grad| {gmax:.2e}, max rel err {err:.2e}, max abs err {abs_err:.2e}",
-            group_name(&s, g)
+            group_name(s, g)
         );
-        assert!(
-            checked >= 3,
-            "{}: only {checked} checked",
-            group_name(&s, g)
-        );
-        assert!(gmax > 1e-4, "{}: vacuous gradient", group_name(&s, g));
+        assert!(checked >= 3, "{}: only {checked} checked", group_name(s, g));
+        assert!(gmax > 1e-4, "{}: vacuous gradient", group_name(s, g));
         if let Group::Mlp(_) = g {
             let motion_part = params
                 .iter()
@@ -432,7 +428,7 @@ fn fd_check(s: &Scene) {
             assert!(
                 motion_part > 0.05 * gmax,
                 "{}: motion term's share of the gradient too small ({motion_part:e})",
-                group_name(&s, g)
+                group_name(s, g)
             );
         }
     }

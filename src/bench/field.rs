@@ -5,8 +5,7 @@
 //! depends on how many Gaussians there are, not on where), so the MLP's share is the one a
 //! real run pays.
 
-use super::median;
-use super::step::{median_zones, scenes, time_interleaved, timed_config, StepRow};
+use super::step::{rows_of, scenes, time_interleaved, timed_config, StepRow};
 use crate::data;
 use crate::error::Result;
 use crate::model::gaussians::HostGaussians;
@@ -14,7 +13,7 @@ use crate::model::nodes::FieldKind;
 use crate::train::cli::load_options;
 use crate::train::plan::hash_uniform;
 use crate::train::Trainer;
-use crate::vk::{Gpu, Timings};
+use crate::vk::Gpu;
 
 /// (label, nodes; `None` = the MLP field).
 pub const FIELDS: [(&str, Option<u32>); 4] = [
@@ -84,16 +83,8 @@ pub fn run_field_bench(gpu: &Gpu, warm: u32, steps: u32, gaussians: u32) -> Resu
                 trainers.push(tr);
             }
             let times = time_interleaved(&mut trainers, warm, steps)?;
-            for ((tr, t), (label, _)) in trainers.iter().zip(times).zip(FIELDS) {
-                rows.push(StepRow {
-                    scene: scene.clone(),
-                    method,
-                    kernels: label,
-                    gaussians: tr.n(),
-                    median_ms: median(t.iter().map(Timings::total_ms).collect()),
-                    zones: median_zones(&t),
-                });
-            }
+            let labels = FIELDS.iter().map(|f| f.0);
+            rows.extend(rows_of(&scene, method, &trainers, times, labels));
         }
     }
     Ok(rows)

@@ -4,8 +4,7 @@
 //! pseudo-random one (the cost of a step depends on how many Gaussians are dynamic, not on
 //! which), so this isolates the speed side of the sparsity knob from training.
 
-use super::median;
-use super::step::{median_zones, scenes, time_interleaved, timed_config, StepRow};
+use super::step::{rows_of, scenes, time_interleaved, timed_config, StepRow};
 use crate::data;
 use crate::error::Result;
 use crate::model::dynamic::SplitSnapshot;
@@ -13,7 +12,7 @@ use crate::train::cli::load_options;
 use crate::train::config::SparsityMode;
 use crate::train::plan::hash_uniform;
 use crate::train::Trainer;
-use crate::vk::{Gpu, Timings};
+use crate::vk::Gpu;
 
 /// (label, dynamic fraction; `None` = dense).
 pub const SPLITS: [(&str, Option<f64>); 5] = [
@@ -57,16 +56,8 @@ pub fn run_sparsity_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRo
                 trainers.push(tr);
             }
             let times = time_interleaved(&mut trainers, warm, steps)?;
-            for ((tr, t), (label, _)) in trainers.iter().zip(times).zip(SPLITS) {
-                rows.push(StepRow {
-                    scene: scene.clone(),
-                    method,
-                    kernels: label,
-                    gaussians: tr.n(),
-                    median_ms: median(t.iter().map(Timings::total_ms).collect()),
-                    zones: median_zones(&t),
-                });
-            }
+            let labels = SPLITS.iter().map(|s| s.0);
+            rows.extend(rows_of(&scene, method, &trainers, times, labels));
         }
     }
     Ok(rows)

@@ -85,6 +85,30 @@ pub(crate) fn time_interleaved(
     Ok(times)
 }
 
+/// One row per trainer (labelled in order by `labels`) of `scene` × `method` from its timed
+/// steps.
+pub(crate) fn rows_of(
+    scene: &str,
+    method: &'static str,
+    trainers: &[Trainer],
+    times: Vec<Vec<Timings>>,
+    labels: impl IntoIterator<Item = &'static str>,
+) -> Vec<StepRow> {
+    trainers
+        .iter()
+        .zip(times)
+        .zip(labels)
+        .map(|((tr, t), label)| StepRow {
+            scene: scene.to_string(),
+            method,
+            kernels: label,
+            gaussians: tr.n(),
+            median_ms: median(t.iter().map(Timings::total_ms).collect()),
+            zones: median_zones(&t),
+        })
+        .collect()
+}
+
 /// Median ms per zone over steps.
 pub(crate) fn median_zones(t: &[Timings]) -> Vec<(String, f64)> {
     let mut zs: Vec<(String, Vec<f64>)> = Vec::new();

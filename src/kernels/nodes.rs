@@ -94,6 +94,20 @@ pub struct BlendInputs<'a> {
     pub node_out: BufSlice<'a>,
 }
 
+impl<'a> BlendInputs<'a> {
+    /// The blend's push constants over `rows` rows (through `idx` when given) and the index
+    /// binding (the KNN stands in, unread, for a dense blend).
+    fn params(&self, rows: u32, idx: Option<BufSlice<'a>>) -> (NodesParams, BufSlice<'a>) {
+        let pc = NodesParams {
+            n: rows,
+            m: self.m,
+            k: self.k,
+            flags: idx.is_some() as u32,
+        };
+        (pc, idx.unwrap_or(self.knn))
+    }
+}
+
 impl NodeKernels {
     pub fn new(gpu: &Gpu) -> Result<Self> {
         use shaders::nodes as s;
@@ -192,13 +206,7 @@ impl NodeKernels {
         idx: Option<BufSlice<'_>>,
         out: BufSlice<'_>,
     ) {
-        let pc = NodesParams {
-            n: rows,
-            m: x.m,
-            k: x.k,
-            flags: idx.is_some() as u32,
-        };
-        let idx = idx.unwrap_or(x.knn); // unread (flags 0)
+        let (pc, idx) = x.params(rows, idx);
         let binds = [x.means, x.quats, x.nodes, x.node_out, x.knn, idx, out];
         rec.set_zone("nodes blend");
         rec.dispatch_rows(&self.lbs, &pc, &binds, rows);
@@ -220,13 +228,7 @@ impl NodeKernels {
         g_quats: BufSlice<'_>,
     ) {
         assert_eq!(x.k, b.k, "blend and scratch for another K");
-        let pc = NodesParams {
-            n: rows,
-            m: x.m,
-            k: x.k,
-            flags: idx.is_some() as u32,
-        };
-        let idx = idx.unwrap_or(x.knn); // unread (flags 0)
+        let (pc, idx) = x.params(rows, idx);
         let binds = [
             x.means,
             x.quats,
