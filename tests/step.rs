@@ -3,6 +3,9 @@
 //! means, log-scales, quaternions, opacity logits, SH DC and rest, MLP time net / trunk /
 //! head; and with the control-node field, node positions and log-radii), and the
 //! detached-statistics variant against the full gradient.
+//!
+//! (Over ~600 lines: one scene builder serves the twin's finite-difference checks and the GPU
+//! step comparisons, which must see the same inputs, MLP and node fields alike.)
 
 use dispflow_vk::model::deform::{MlpConfig, MlpLayout, TimeEncoding, OUT_DIMS};
 use dispflow_vk::model::gaussians::HostGaussians;
