@@ -9,7 +9,7 @@ use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::Checkpoint;
 use dispflow_vk::train::config::TrainConfig;
 use dispflow_vk::train::Trainer;
-use train_common::{tiny_config, tiny_dataset};
+use train_common::{run_to, tiny_config, tiny_dataset};
 
 mod train_common;
 
@@ -26,12 +26,6 @@ fn nodes_config() -> TrainConfig {
     cfg.deform_field.knn = 4;
     cfg.deform_field.knn_every = 15; // a KNN update at 45, after the interruption
     cfg
-}
-
-fn run_to(tr: &mut Trainer, end: u32) {
-    while tr.iteration < end {
-        tr.step(false, false).unwrap();
-    }
 }
 
 #[test]

@@ -10,7 +10,7 @@
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::Checkpoint;
 use dispflow_vk::train::Trainer;
-use train_common::{tiny_config, tiny_dataset};
+use train_common::{run_to, tiny_config, tiny_dataset};
 
 mod train_common;
 
@@ -26,11 +26,6 @@ fn resume_reproduces_an_uninterrupted_run() {
     cfg.densify.from = 10;
     cfg.densify.interval = 20; // densify at 20 and 40: before and after the interruption
 
-    let run_to = |tr: &mut Trainer, end: u32| {
-        while tr.iteration < end {
-            tr.step(false, false).unwrap();
-        }
-    };
     let mut a = Trainer::new(&gpu, &cfg, &ds).unwrap();
     run_to(&mut a, 60);
     let straight = a.checkpoint().unwrap();

@@ -8,6 +8,13 @@ use dispflow_vk::data::synthetic::{self, Preset as ScenePreset};
 use dispflow_vk::data::{self, Dataset, LoadOptions};
 use dispflow_vk::train::config::TrainConfig;
 
+/// Steps `tr` until it has completed `end` iterations.
+pub fn run_to(tr: &mut dispflow_vk::train::Trainer, end: u32) {
+    while tr.iteration < end {
+        tr.step(false, false).unwrap();
+    }
+}
+
 pub fn tiny_scene(dir: &std::path::Path) -> PathBuf {
     let d = dir.join("tiny");
     synthetic::generate(ScenePreset::Tiny, 3, &d).unwrap();
