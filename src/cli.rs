@@ -36,6 +36,11 @@ pub enum Command {
     /// Time the GPU kernels (sort, scan, rasteriser forward/backward) with GPU timestamps and
     /// print a table of medians.
     Bench(dispflow_vk::bench::BenchArgs),
+    /// Run a plan of scenes × variants × seeds (each cell its own train + eval process,
+    /// resumable; locally or as a Slurm job array) and write results.jsonl, the paper-layout
+    /// tables and the speed/accuracy trade with its Pareto plot. `sweep report DIR` rebuilds
+    /// the tables from the results.
+    Sweep(dispflow_vk::sweep::SweepArgs),
     /// Generate or check datasets.
     Data(dispflow_vk::data::cli::DataArgs),
 }

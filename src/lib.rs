@@ -12,6 +12,8 @@
 //!   list of pass calls, the loop, checkpoints and the `train` command.
 //! - [`eval`]: per-frame evaluation with its own scratch, the one `metrics.json` schema, the
 //!   `eval` and `render` commands.
+//! - [`sweep`]: plans of scenes × variants × seeds run as `train` + `eval` processes
+//!   (locally or as a Slurm job array) and the tables built from their results.
 //! - [`report`]: CPU-drawn pictures (heat maps, labelled strips, line plots) and Markdown
 //!   tables for `eval` and `render`.
 
@@ -24,6 +26,7 @@ pub mod model;
 pub mod reference;
 pub mod report;
 pub mod shaders;
+pub mod sweep;
 pub mod testing;
 pub mod train;
 pub mod vk;

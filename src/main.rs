@@ -39,6 +39,7 @@ fn main() -> anyhow::Result<()> {
         cli::Command::Bench(args) => {
             dispflow_vk::bench::run(&args)?;
         }
+        cli::Command::Sweep(a) => dispflow_vk::sweep::run(&a)?,
         cli::Command::Data(a) => dispflow_vk::data::cli::run(&a)?,
     }
     Ok(())

@@ -54,8 +54,8 @@ pub struct Report {
     /// Median wall ms per step of the last launch by what the step ran (`train` only).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub ms_per_step_by_phase: Vec<PhaseMs>,
-    /// Wall seconds of the last launch's training steps (`train` only; `log.jsonl`'s `wall_s`
-    /// counts across resumes).
+    /// Wall seconds of the training steps across resumes (`train` only; as `log.jsonl`'s
+    /// `wall_s`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub train_seconds: Option<f64>,
     /// Training seconds until the test-PSNR probe first read each threshold (`train` only;

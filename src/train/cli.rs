@@ -258,10 +258,23 @@ pub fn resolve_config(a: &TrainArgs) -> Result<TrainConfig> {
 /// Resolves flags over the preset (`--preset`, else [`default_preset`] for the device) and
 /// the optional TOML file.
 pub fn resolve_config_on(a: &TrainArgs, cpu_device: bool) -> Result<TrainConfig> {
+    resolve_config_with(a, cpu_device, None)
+}
+
+/// [`resolve_config_on`] with TOML text `(text, origin)` merged after `--config` and before
+/// the flags (how `sweep` checks a cell's config table before anything runs).
+pub fn resolve_config_with(
+    a: &TrainArgs,
+    cpu_device: bool,
+    extra: Option<(&str, &str)>,
+) -> Result<TrainConfig> {
     let preset = a.preset.unwrap_or(default_preset(a, cpu_device).0);
     let mut c = TrainConfig::preset(preset);
     if let Some(p) = &a.config {
         c = TrainConfig::from_toml_over(&c, p)?;
+    }
+    if let Some((text, origin)) = extra {
+        c = TrainConfig::from_toml_str_over(&c, text, origin)?;
     }
     if let Some(v) = a.iterations {
         c = c.with_iterations(v);
@@ -670,7 +683,7 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     // None when no step ran (a resumed run that had already finished).
     metrics.ms_per_step = (!step_ms.is_empty()).then(|| crate::bench::median(step_ms.clone()));
     metrics.dynamic_fraction = Some(tr.dynamic_fraction());
-    metrics.train_seconds = Some(step_ms.iter().sum::<f64>() / 1e3);
+    metrics.train_seconds = Some(wall_before + step_ms.iter().sum::<f64>() / 1e3);
     metrics.ms_per_step_by_phase = phase_ms
         .into_iter()
         .map(|(phase, v)| crate::eval::report::PhaseMs {

@@ -570,15 +570,20 @@ impl TrainConfig {
             path: path.display().to_string(),
             source,
         })?;
+        Self::from_toml_str_over(base, &text, &path.display().to_string())
+    }
+
+    /// Like [`TrainConfig::from_toml_over`] for TOML text; errors name `origin`.
+    pub fn from_toml_str_over(base: &TrainConfig, text: &str, origin: &str) -> Result<Self> {
         let mut merged = toml::Value::try_from(base).expect("config serialises");
-        let user: toml::Value = toml::from_str(&text)
-            .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+        let user: toml::Value =
+            toml::from_str(text).map_err(|e| Error::Invalid(format!("{origin}: {e}")))?;
         merge(&mut merged, user);
         let cfg: TrainConfig = merged
             .try_into()
-            .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+            .map_err(|e| Error::Invalid(format!("{origin}: {e}")))?;
         cfg.problem()
-            .map_err(|m| Error::Invalid(format!("{}: {m}", path.display())))?;
+            .map_err(|m| Error::Invalid(format!("{origin}: {m}")))?;
         Ok(cfg)
     }
 
