@@ -10,6 +10,9 @@
 #   vulkan-validationlayers  Khronos validation layer (tests fail on any validation error)
 #   libshaderc-dev           shaderc + glslang + SPIRV-Tools static libraries (GLSL -> SPIR-V in build.rs)
 #   build-essential          C/C++ toolchain and `ar`
+#   slurmctld slurmd slurm-client munge
+#                            Slurm 22.05 and munge, for `sweep --slurm` and its test against real
+#                            daemons (tools/slurm_local.sh starts a one-node cluster, no systemd)
 # Other systems: install the Vulkan loader, a Vulkan driver (lavapipe works), the Khronos validation
 # layer and shaderc's static libraries, then point SHADERC_LIB_DIR at a directory holding a
 # self-contained libshaderc_combined.a (or enable the shaderc crate's `build-from-source` feature).
@@ -19,7 +22,7 @@ cd "$(dirname "$0")/.."
 check_only=0
 [ "${1:-}" = "--check" ] && check_only=1
 
-pkgs=(mesa-vulkan-drivers vulkan-validationlayers libshaderc-dev build-essential)
+pkgs=(mesa-vulkan-drivers vulkan-validationlayers libshaderc-dev build-essential slurmctld slurmd slurm-client munge)
 missing=()
 if command -v dpkg-query >/dev/null 2>&1; then
   for p in "${pkgs[@]}"; do
