@@ -227,6 +227,9 @@ fn eval_and_render_a_tiny_run() {
         frames: 60,
         flow: true,
         ply: true,
+        zip: true,
+        gif: true,
+        fps: 12,
         out: Some(out.clone()),
     })
     .unwrap();
@@ -254,6 +257,8 @@ fn eval_and_render_a_tiny_run() {
         "the deformation moved Gaussians"
     );
     drop(tr);
+    check_gif(&out.join("animation.gif"), n_val, (3 * 64 + 2 * 2, 64 + 12));
+    check_sequence_zip(&out.join("ply"), n_val);
 
     // --- render: orbit with frozen time, fixed camera over time ---
     for (path, frames, time, camera) in [
@@ -271,6 +276,9 @@ fn eval_and_render_a_tiny_run() {
             frames,
             flow: false,
             ply: false,
+            zip: false,
+            gif: false,
+            fps: 12,
             out: Some(out),
         })
         .unwrap();
@@ -288,6 +296,9 @@ fn eval_and_render_a_tiny_run() {
         frames: 2,
         flow: false,
         ply: false,
+        zip: false,
+        gif: false,
+        fps: 12,
         out: Some(tmp.path().join("bad")),
     })
     .unwrap_err()
@@ -421,4 +432,59 @@ fn a_nodes_run_evaluates_to_its_training_numbers() {
         err.contains("nodes.bin") && err.contains("16 per control node"),
         "{err}"
     );
+}
+
+/// The GIF decodes to one frame per rendered view, each the size of the strips.
+fn check_gif(path: &Path, frames: usize, size: (u32, u32)) {
+    use image::AnimationDecoder;
+    let f = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let dec = image::codecs::gif::GifDecoder::new(f).unwrap();
+    let frames_read = dec.into_frames().collect_frames().unwrap();
+    assert_eq!(frames_read.len(), frames);
+    for f in &frames_read {
+        assert_eq!(f.buffer().dimensions(), size);
+        // GIF stores hundredths of a second: 1/12 s is 8 of them.
+        let (n, d) = f.delay().numer_denom_ms();
+        assert_eq!(n as f64 / d as f64, 80.0);
+    }
+}
+
+/// `ply/sequence.zip` as brush reads it: entries streamed from the local headers (stored,
+/// sizes and CRC in the header, no data descriptor), the `.ply` names in natural order are
+/// the frames; and as a central-directory reader (the zip crate) reads it: the same files.
+fn check_sequence_zip(ply_dir: &Path, frames: usize) {
+    let bytes = std::fs::read(ply_dir.join("sequence.zip")).unwrap();
+    let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]) as usize;
+    let u32_at = |o: usize| u32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
+    let mut at = 0;
+    let mut streamed = Vec::new();
+    while u32_at(at) == 0x0403_4b50 {
+        assert_eq!(u16_at(at + 6) & 0x8, 0, "no data descriptor: a stream reader needs sizes");
+        assert_eq!(u16_at(at + 8), 0, "stored");
+        let (crc, size) = (u32_at(at + 14), u32_at(at + 18) as usize);
+        assert_eq!(u32_at(at + 22) as usize, size);
+        let (n, extra) = (u16_at(at + 26), u16_at(at + 28));
+        let name = String::from_utf8(bytes[at + 30..at + 30 + n].to_vec()).unwrap();
+        let data = &bytes[at + 30 + n + extra..at + 30 + n + extra + size];
+        assert_eq!(dispflow_vk::eval::export::crc32(data), crc, "{name}");
+        assert_eq!(data, std::fs::read(ply_dir.join(&name)).unwrap(), "{name}");
+        streamed.push(name);
+        at += 30 + n + extra + size;
+    }
+    assert_eq!(u32_at(at), 0x0201_4b50, "the central directory follows the entries");
+    let want: Vec<String> = (0..frames).map(|k| format!("frame_{k:04}.ply")).collect();
+    let mut plys: Vec<String> = streamed.iter().filter(|n| n.ends_with(".ply")).cloned().collect();
+    plys.sort(); // zero-padded: natural order is byte order
+    assert_eq!(plys, want, "the frames, and nothing that would play as one");
+    assert_eq!(streamed, want);
+
+    let mut z = zip::ZipArchive::new(std::io::Cursor::new(&bytes)).unwrap();
+    assert_eq!(z.len(), frames);
+    for (i, name) in want.iter().enumerate() {
+        let mut f = z.by_index(i).unwrap();
+        assert_eq!(f.name(), name);
+        let mut data = Vec::new();
+        std::io::Read::read_to_end(&mut f, &mut data).unwrap(); // checks the CRC
+        assert_eq!(data, std::fs::read(ply_dir.join(name)).unwrap());
+    }
 }

@@ -10,7 +10,6 @@ use crate::data;
 use crate::error::Result;
 use crate::model::gaussians::HostGaussians;
 use crate::model::nodes::FieldKind;
-use crate::train::cli::load_options;
 use crate::train::plan::hash_uniform;
 use crate::train::Trainer;
 use crate::vk::Gpu;
@@ -65,7 +64,7 @@ pub fn run_field_bench(gpu: &Gpu, warm: u32, steps: u32, gaussians: u32) -> Resu
         for (method, weight) in [("baseline", 0.0f32), ("DispFlow", 0.1)] {
             let mut cfg = timed_config(weight);
             cfg.densify.budget = cfg.densify.budget.max(gaussians);
-            let data = data::load(&dir, &load_options(&cfg))?;
+            let data = data::load(&dir, &cfg.load_options())?;
             let mut trainers = Vec::new();
             for (_, nodes) in FIELDS {
                 let mut c = cfg.clone();

@@ -9,7 +9,6 @@ use super::median;
 use super::step::{median_zones, scenes, time_interleaved, timed_config, StepRow};
 use crate::data;
 use crate::error::Result;
-use crate::train::cli::load_options;
 use crate::train::config::{SceneMotionConfig, TrainConfig};
 use crate::train::method::{Method, MotionRepresentation, SceneMotionKind};
 use crate::train::Trainer;
@@ -76,7 +75,7 @@ pub fn run_motion_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>
     let opts = options();
     for (scene, dir) in scenes()? {
         let base = timed_config(0.1);
-        let data = data::load(&dir, &load_options(&base))?;
+        let data = data::load(&dir, &base.load_options())?;
         let mut trainers = Vec::new();
         for (_, weight, preset, sm) in &opts {
             let cfg = TrainConfig {
@@ -149,7 +148,7 @@ pub fn run_method_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>
     let cases = method_cases();
     for (scene, dir) in scenes()? {
         let base = timed_config(0.1);
-        let data = data::load(&dir, &load_options(&base))?;
+        let data = data::load(&dir, &base.load_options())?;
         let mut trainers = Vec::new();
         for (_, method, cell) in &cases {
             let mut cfg = base.clone();

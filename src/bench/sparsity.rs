@@ -8,7 +8,6 @@ use super::step::{rows_of, scenes, time_interleaved, timed_config, StepRow};
 use crate::data;
 use crate::error::Result;
 use crate::model::dynamic::SplitSnapshot;
-use crate::train::cli::load_options;
 use crate::train::config::SparsityMode;
 use crate::train::plan::hash_uniform;
 use crate::train::Trainer;
@@ -33,7 +32,7 @@ pub fn run_sparsity_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRo
             cfg.sparsity.start = 0.0;
             cfg.sparsity.every = 1.0;
             cfg.sparsity.dense_window = 0.0;
-            let data = data::load(&dir, &load_options(&cfg))?;
+            let data = data::load(&dir, &cfg.load_options())?;
             let mut trainers = Vec::new();
             for (_, frac) in SPLITS {
                 let mut c = cfg.clone();

@@ -9,7 +9,7 @@ use super::{median, BenchRow};
 use crate::data::{self, synthetic::Preset as ScenePreset};
 use crate::error::Result;
 use crate::kernels::mlp_fused::FmaPeak;
-use crate::train::cli::{builtin_scene, load_options};
+use crate::data::builtin::builtin_scene;
 use crate::train::config::{Preset, TrainConfig};
 use crate::train::Trainer;
 use crate::vk::{Gpu, Recorder, Timings};
@@ -153,7 +153,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
     for (scene, dir) in scenes()? {
         for (method, weight) in [("baseline", 0.0f32), ("DispFlow", 0.1)] {
             let cfg = timed_config(weight);
-            let data = data::load(&dir, &load_options(&cfg))?;
+            let data = data::load(&dir, &cfg.load_options())?;
             let mut trainers = Vec::new();
             for k in KERNEL_SETS {
                 std::env::set_var("DISPFLOW_MLP_KERNELS", k.mlp);

@@ -23,6 +23,7 @@
 //!   change); motion masks are row-major `H×W` u8 with moving = 1.
 
 pub mod blender;
+pub mod builtin;
 pub mod camera;
 pub mod check;
 pub mod cli;

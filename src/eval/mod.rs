@@ -5,6 +5,7 @@
 //! touches a training buffer.
 
 pub mod epe;
+pub mod export;
 pub mod lpips;
 pub mod regions;
 pub mod render;

@@ -56,6 +56,16 @@ pub struct RenderArgs {
     /// (`ply/frame_NNNN.ply`) plus `ply/canonical.ply`.
     #[arg(long)]
     pub ply: bool,
+    /// With --ply: also pack the per-frame PLYs into `ply/sequence.zip`, which brush's viewer
+    /// plays as an animation (frames only, stored, natural order).
+    #[arg(long, requires = "ply")]
+    pub zip: bool,
+    /// Also write the frames as a looping animated GIF, `animation.gif`.
+    #[arg(long)]
+    pub gif: bool,
+    /// Frames per second of the GIF.
+    #[arg(long, default_value_t = 12)]
+    pub fps: u32,
     /// Output directory [default: RUN/render/<path>].
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -263,8 +273,16 @@ pub fn run_render(a: &RenderArgs) -> Result<Vec<PathBuf>> {
         })?;
         write_ply(&dir.join("canonical.ply"), &tr.gaussians()?)?;
     }
+    if a.gif && (a.fps == 0 || a.fps > 100) {
+        return Err(Error::Invalid(format!(
+            "--fps {}: expected 1 to 100 (GIF delays are hundredths of a second)",
+            a.fps
+        )));
+    }
     let pb = progress(views.len() as u64, "render");
     let mut written = Vec::new();
+    let mut gif_frames = Vec::new();
+    let mut plys = Vec::new();
     for (k, v) in views.iter().enumerate() {
         let prev = if a.flow {
             times
@@ -295,13 +313,29 @@ pub fn run_render(a: &RenderArgs) -> Result<Vec<PathBuf>> {
         let path = out.join(format!("{k:04}.png"));
         report::save_png(&img, &path)?;
         written.push(path);
+        if a.gif {
+            gif_frames.push(img);
+        }
         if a.ply {
             let g = tr.deformed_gaussians(v.time)?;
-            write_ply(&out.join("ply").join(format!("frame_{k:04}.ply")), &g)?;
+            let name = format!("frame_{k:04}.ply");
+            let p = out.join("ply").join(&name);
+            write_ply(&p, &g)?;
+            plys.push((name, p));
         }
         pb.inc(1);
     }
     pb.finish_and_clear();
+    if a.gif {
+        let p = out.join("animation.gif");
+        super::export::write_gif(&p, &gif_frames, a.fps)?;
+        eprintln!("animation: {}", p.display());
+    }
+    if a.zip {
+        let p = out.join("ply").join("sequence.zip");
+        super::export::write_stored_zip(&p, &plys)?;
+        eprintln!("PLY sequence for brush: {}", p.display());
+    }
     eprintln!(
         "{} frames ({} path) in {}",
         written.len(),

@@ -16,7 +16,7 @@ use crate::model::nodes::FieldKind;
 use crate::model::state::{gaussian_blobs, mlp_config_of};
 use crate::report::{self, Plot, Series, PALETTE};
 use crate::train::checkpoint::{read_ply, write_atomic};
-use crate::train::cli::{load_options, LogLine};
+use crate::train::outputs::LogLine;
 use crate::train::config::TrainConfig;
 use crate::train::Trainer;
 use crate::vk::Gpu;
@@ -250,7 +250,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
 
 /// Loads the run's dataset and a trainer holding its model.
 pub fn load_trainer<'g>(gpu: &'g Gpu, run: &Run) -> Result<(Dataset, Trainer<'g>)> {
-    let ds = data::load(&run.data_dir, &load_options(&run.cfg))?;
+    let ds = data::load(&run.data_dir, &run.cfg.load_options())?;
     let mut tr = Trainer::new(gpu, &run.cfg, &ds)?;
     tr.load_model(&run.gaussians, &run.mlp, run.iterations)
         .map_err(|e| invalid(&run.dir, format!("the saved model does not load: {e}")))?;

@@ -21,7 +21,6 @@ use crate::kernels::metrics::{MetricBuffers, MotionMetrics};
 use crate::kernels::motion::{MotionNorm, NormBuffers, NormConfig};
 use crate::kernels::raster::RenderOpts;
 use crate::train::checkpoint::{is_kept_checkpoint, write_atomic, Checkpoint};
-use crate::train::cli::load_options;
 use crate::train::config::SceneMotionConfig;
 use crate::train::frames::{attach_gt_flow, attach_masks, GpuFrame};
 use crate::train::passes::motion::{OpticalFlow, OracleFlow};
@@ -226,7 +225,7 @@ pub fn run_signal(a: &SignalArgs) -> Result<Vec<SignalScores>> {
     let run = open_run(&a.run, a.data.as_deref())?;
     let ckpts = checkpoints(a)?;
     let gpu = Gpu::new_default()?;
-    let ds = data::load(&run.data_dir, &load_options(&run.cfg))?;
+    let ds = data::load(&run.data_dir, &run.cfg.load_options())?;
     let mut out = Vec::new();
     for path in &ckpts {
         let mut tr = Trainer::new(&gpu, &run.cfg, &ds)?;

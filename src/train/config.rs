@@ -587,6 +587,20 @@ impl TrainConfig {
         Ok(cfg)
     }
 
+    /// How a run loads its dataset (resolution, background of transparent images, seed).
+    pub fn load_options(&self) -> crate::data::LoadOptions {
+        let bg = match self.background {
+            Background::White => [1.0; 3],
+            _ => [0.0; 3],
+        };
+        crate::data::LoadOptions {
+            max_size: (self.max_resolution > 0).then_some(self.max_resolution),
+            background: bg,
+            seed: self.seed,
+            ..crate::data::LoadOptions::default()
+        }
+    }
+
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).expect("config serialises")
     }

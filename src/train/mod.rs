@@ -15,6 +15,7 @@ pub mod method;
 pub mod outputs;
 pub mod passes;
 pub mod plan;
+pub mod session;
 pub mod step;
 
 use std::rc::Rc;
