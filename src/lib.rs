@@ -9,9 +9,12 @@
 //! - [`data`]: dataset loaders and the built-in synthetic scene.
 //! - [`model`]: the trainable state on the GPU (Gaussians, deformation MLP) and its layouts.
 //! - [`train`]: a pure per-iteration plan, passes that own pipelines and scratch, the step as a
-//!   list of pass calls, the loop, checkpoints and the `train` command.
-//! - [`eval`]: per-frame evaluation with its own scratch, the one `metrics.json` schema, the
-//!   `eval` and `render` commands.
+//!   list of pass calls, the loop as a library call ([`train::session::train_run`]),
+//!   checkpoints, scoring a frame ([`train::score`]: the Evaluator both training's probe and
+//!   `eval` run) and the one `metrics.json` schema ([`train::metrics`]); `train::cli` only
+//!   parses flags.
+//! - [`eval`]: the commands that reopen a run (`eval`, `render`, `signal`); above `train`,
+//!   which never imports from it.
 //! - [`sweep`]: plans of scenes × variants × seeds run as `train` + `eval` processes
 //!   (locally or as a Slurm job array) and the tables built from their results.
 //! - [`report`]: CPU-drawn pictures (heat maps, labelled strips, line plots) and Markdown

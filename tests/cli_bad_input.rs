@@ -602,7 +602,7 @@ fn eval_and_render_bad_run_directories() {
 /// evaluated, naming the file and the tensor; a valid file fills the LPIPS column.
 #[test]
 fn eval_bad_lpips_weights() {
-    use dispflow_vk::eval::lpips::{random_weights, to_safetensors};
+    use dispflow_vk::train::score::lpips::{random_weights, to_safetensors};
     let f = fixture();
     let w = random_weights(9);
     let dir = f.root.join("lpips-weights");

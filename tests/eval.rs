@@ -459,7 +459,11 @@ fn check_sequence_zip(ply_dir: &Path, frames: usize) {
     let mut at = 0;
     let mut streamed = Vec::new();
     while u32_at(at) == 0x0403_4b50 {
-        assert_eq!(u16_at(at + 6) & 0x8, 0, "no data descriptor: a stream reader needs sizes");
+        assert_eq!(
+            u16_at(at + 6) & 0x8,
+            0,
+            "no data descriptor: a stream reader needs sizes"
+        );
         assert_eq!(u16_at(at + 8), 0, "stored");
         let (crc, size) = (u32_at(at + 14), u32_at(at + 18) as usize);
         assert_eq!(u32_at(at + 22) as usize, size);
@@ -471,9 +475,17 @@ fn check_sequence_zip(ply_dir: &Path, frames: usize) {
         streamed.push(name);
         at += 30 + n + extra + size;
     }
-    assert_eq!(u32_at(at), 0x0201_4b50, "the central directory follows the entries");
+    assert_eq!(
+        u32_at(at),
+        0x0201_4b50,
+        "the central directory follows the entries"
+    );
     let want: Vec<String> = (0..frames).map(|k| format!("frame_{k:04}.ply")).collect();
-    let mut plys: Vec<String> = streamed.iter().filter(|n| n.ends_with(".ply")).cloned().collect();
+    let mut plys: Vec<String> = streamed
+        .iter()
+        .filter(|n| n.ends_with(".ply"))
+        .cloned()
+        .collect();
     plys.sort(); // zero-padded: natural order is byte order
     assert_eq!(plys, want, "the frames, and nothing that would play as one");
     assert_eq!(streamed, want);

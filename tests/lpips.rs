@@ -5,12 +5,12 @@
 
 use std::path::{Path, PathBuf};
 
-use dispflow_vk::eval::lpips::{
-    load_weights, parse_weights, random_weights, to_safetensors, LpipsScorer,
-};
 use dispflow_vk::kernels::lpips::{Lpips, LpipsConvParams, LpipsWeights, Plan, ALEXNET, MIN_SIDE};
 use dispflow_vk::reference::lpips as twin;
 use dispflow_vk::testing::{self, Noise};
+use dispflow_vk::train::score::lpips::{
+    load_weights, parse_weights, random_weights, to_safetensors, LpipsScorer,
+};
 use dispflow_vk::vk::{Gpu, Recorder};
 
 fn uniform(seed: u64, n: usize, lo: f32, hi: f32) -> Vec<f32> {

@@ -19,10 +19,10 @@
 mod train_common;
 
 use dispflow_vk::data;
-use dispflow_vk::eval::report::motion_means;
 use dispflow_vk::kernels::metrics::mmap;
 use dispflow_vk::testing;
 use dispflow_vk::train::config::{MotionFlow, SceneMotionConfig, TrainConfig};
+use dispflow_vk::train::metrics::motion_means;
 use dispflow_vk::train::Trainer;
 use train_common::{tiny_config, tiny_dataset};
 

@@ -7,10 +7,10 @@ mod train_common;
 
 use dispflow_vk::data::synthetic::{self, Preset, SceneMotion};
 use dispflow_vk::data::{self, LoadOptions};
-use dispflow_vk::eval::epe;
-use dispflow_vk::eval::regions::{dilate, region_psnr};
 use dispflow_vk::reference::raster as twin;
 use dispflow_vk::testing;
+use dispflow_vk::train::score::epe;
+use dispflow_vk::train::score::regions::{dilate, region_psnr};
 use dispflow_vk::train::Trainer;
 use train_common::{tiny_config, tiny_dataset};
 
@@ -119,7 +119,7 @@ fn evaluation_reports_regions_where_masks_exist_and_nothing_where_they_are_empty
                 assert_eq!((e.dynamic_psnr, e.static_psnr), (None, None), "{}", e.id);
             }
         }
-        let ctx = dispflow_vk::eval::report::ReportContext {
+        let ctx = dispflow_vk::train::metrics::ReportContext {
             run: "r".into(),
             scene: "s".into(),
             dataset: "d".into(),
@@ -127,7 +127,7 @@ fn evaluation_reports_regions_where_masks_exist_and_nothing_where_they_are_empty
             iterations: 0,
             num_gaussians: tr.n(),
         };
-        let r = dispflow_vk::eval::Report::new(&cfg, ctx, per);
+        let r = dispflow_vk::train::metrics::Report::new(&cfg, ctx, per);
         let json = r.to_json();
         assert_eq!(r.dynamic_psnr.is_some(), moving, "{motion:?}");
         assert_eq!(

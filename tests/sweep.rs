@@ -57,7 +57,9 @@ impl Setup {
         let root = tmp.path().to_path_buf();
         for (name, seed, motion) in [("moving", "3", "moving"), ("frozen", "5", "static")] {
             let st = Command::new(env!("CARGO_BIN_EXE_dispflow-vk"))
-                .args(["data", "gen", "--preset", "tiny", "--seed", seed, "--motion", motion])
+                .args([
+                    "data", "gen", "--preset", "tiny", "--seed", seed, "--motion", motion,
+                ])
                 .arg("--out")
                 .arg(root.join(name))
                 .stdout(Stdio::null())
@@ -128,7 +130,10 @@ fn check_tables(dir: &Path) -> Vec<CellResult> {
         assert!(r.ms_per_step.is_some_and(|v| v > 0.0), "{r:?}");
         assert!(r.train_seconds.is_some_and(|v| v > 0.0), "{r:?}");
         assert_eq!(r.iterations, 30);
-        assert!(r.strip.as_ref().is_some_and(|s| dir.join(s).is_file()), "{r:?}");
+        assert!(
+            r.strip.as_ref().is_some_and(|s| dir.join(s).is_file()),
+            "{r:?}"
+        );
         assert!(dir.join(&r.run).join("metrics.json").is_file());
     }
     // Metrics the scene has: masks (and so MMAP and dynamic PSNR) only where things move.
@@ -149,11 +154,19 @@ fn check_tables(dir: &Path) -> Vec<CellResult> {
         assert_eq!(row[0], variant);
         for scene in ["moving", "frozen"] {
             let want = format!("{:.2}", cell(&rs, scene, variant).psnr);
-            assert_eq!(row[col(&format!("{scene} PSNR"))], want, "{variant} {scene}");
+            assert_eq!(
+                row[col(&format!("{scene} PSNR"))],
+                want,
+                "{variant} {scene}"
+            );
         }
         let mean = (cell(&rs, "moving", variant).psnr + cell(&rs, "frozen", variant).psnr) / 2.0;
         assert_eq!(row[col("mean PSNR")], format!("{mean:.2}"));
-        assert_eq!(row[col("moving LPIPS")], "n/a", "no weights: never a made-up number");
+        assert_eq!(
+            row[col("moving LPIPS")],
+            "n/a",
+            "no weights: never a made-up number"
+        );
     }
     // The trade table's CSV carries the numbers themselves.
     let csv = std::fs::read_to_string(dir.join("tables/trade.csv")).unwrap();
@@ -171,13 +184,17 @@ fn check_tables(dir: &Path) -> Vec<CellResult> {
     }
     // Every scene has a Pareto-optimal variant, and the report links the plot.
     for scene in ["moving", "frozen"] {
-        assert!(rows.iter().any(|r| r[at("Scene")] == scene && r[at("Pareto")] == "✓"));
+        assert!(rows
+            .iter()
+            .any(|r| r[at("Scene")] == scene && r[at("Pareto")] == "✓"));
     }
     let report = std::fs::read_to_string(dir.join("report.md")).unwrap();
     assert!(report.contains("pareto.png") && dir.join("pareto.png").is_file());
     for k in ["motion", "ablation"] {
-        let t = Table::parse_markdown(&std::fs::read_to_string(dir.join(format!("tables/{k}.md"))).unwrap())
-            .unwrap();
+        let t = Table::parse_markdown(
+            &std::fs::read_to_string(dir.join(format!("tables/{k}.md"))).unwrap(),
+        )
+        .unwrap();
         assert_eq!(t.rows.len(), 2, "{k}");
     }
     rs
@@ -220,7 +237,10 @@ fn a_tiny_plan_runs_end_to_end_is_skipped_when_done_and_its_tables_rebuild() {
     let changed = s.plan("tiny", &two_scenes().replace("nodes = 32", "nodes = 16"));
     let (ok, out) = s.sweep(&[changed.to_str().unwrap(), "--out", "out"]);
     assert!(!ok);
-    assert!(out.contains("moving/DispFlow-GS/seed0") && out.contains("other settings"), "{out}");
+    assert!(
+        out.contains("moving/DispFlow-GS/seed0") && out.contains("other settings"),
+        "{out}"
+    );
 }
 
 #[test]
@@ -253,8 +273,14 @@ fn a_killed_cell_resumes_from_its_checkpoint() {
             .unwrap_or(false)
     };
     while !logged(25) {
-        assert!(t0.elapsed() < Duration::from_secs(120), "the cell never reached iteration 25");
-        assert!(child.try_wait().unwrap().is_none(), "the sweep ended before it was killed");
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "the cell never reached iteration 25"
+        );
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the sweep ended before it was killed"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     // SIGKILL the sweep and its train process (one process group).
@@ -266,18 +292,27 @@ fn a_killed_cell_resumes_from_its_checkpoint() {
         .unwrap();
     assert!(st.success());
     child.wait().unwrap();
-    assert!(!run.join("../cell.json").exists(), "killed before it finished");
+    assert!(
+        !run.join("../cell.json").exists(),
+        "killed before it finished"
+    );
     assert!(!logged(60));
 
     let (ok, out) = s.sweep(&[plan.to_str().unwrap(), "--out", "killed"]);
     assert!(ok, "{out}");
     let log = std::fs::read_to_string(run.join("../train.log")).unwrap();
-    assert!(log.contains("resumed from"), "the cell restarted instead of resuming:\n{log}");
+    assert!(
+        log.contains("resumed from"),
+        "the cell restarted instead of resuming:\n{log}"
+    );
     let a = read_results(&s.root.join("whole/results.jsonl")).unwrap();
     let b = read_results(&s.root.join("killed/results.jsonl")).unwrap();
     assert_eq!((a.len(), b.len()), (1, 1));
     // Bit-exact resume (LP_NUM_THREADS=1): the same quality as the uninterrupted cell.
-    assert_eq!((a[0].psnr, a[0].ssim, a[0].mmap), (b[0].psnr, b[0].ssim, b[0].mmap));
+    assert_eq!(
+        (a[0].psnr, a[0].ssim, a[0].mmap),
+        (b[0].psnr, b[0].ssim, b[0].mmap)
+    );
     assert_eq!(a[0].num_gaussians, b[0].num_gaussians);
 }
 
@@ -287,26 +322,79 @@ fn bad_plans_are_refused_by_name_before_anything_runs() {
     let scene = "[[scene]]\nname = \"moving\"\ndata = \"moving\"\n";
     let variant = "[[variant]]\nname = \"v\"\n";
     let cases = [
-        ("unknown flag", format!("{scene}[[variant]]\nname = \"v\"\nflags = {{ frobnicate = 1 }}\n"), "--frobnicate"),
-        ("unknown plan field", format!("colour = 3\n{scene}{variant}"), "colour"),
-        ("unknown config field", format!("{scene}[[variant]]\nname = \"v\"\nconfig = {{ densify = {{ budgett = 3 }} }}\n"), "budgett"),
-        ("bad flag value", format!("{scene}[[variant]]\nname = \"v\"\nflags = {{ mlp-width = \"wide\" }}\n"), "--mlp-width"),
-        ("out-of-range config", format!("{scene}[[variant]]\nname = \"v\"\nconfig = {{ iterations = 0 }}\n"), "iterations"),
-        ("a flag the sweep owns", format!("{scene}[[variant]]\nname = \"v\"\nflags = {{ seed = 3 }}\n"), "seeds"),
-        ("missing scene", format!("[[scene]]\nname = \"gone\"\ndata = \"nowhere\"\n{variant}"), "\"gone\""),
+        (
+            "unknown flag",
+            format!("{scene}[[variant]]\nname = \"v\"\nflags = {{ frobnicate = 1 }}\n"),
+            "--frobnicate",
+        ),
+        (
+            "unknown plan field",
+            format!("colour = 3\n{scene}{variant}"),
+            "colour",
+        ),
+        (
+            "unknown config field",
+            format!(
+                "{scene}[[variant]]\nname = \"v\"\nconfig = {{ densify = {{ budgett = 3 }} }}\n"
+            ),
+            "budgett",
+        ),
+        (
+            "bad flag value",
+            format!("{scene}[[variant]]\nname = \"v\"\nflags = {{ mlp-width = \"wide\" }}\n"),
+            "--mlp-width",
+        ),
+        (
+            "out-of-range config",
+            format!("{scene}[[variant]]\nname = \"v\"\nconfig = {{ iterations = 0 }}\n"),
+            "iterations",
+        ),
+        (
+            "a flag the sweep owns",
+            format!("{scene}[[variant]]\nname = \"v\"\nflags = {{ seed = 3 }}\n"),
+            "seeds",
+        ),
+        (
+            "missing scene",
+            format!("[[scene]]\nname = \"gone\"\ndata = \"nowhere\"\n{variant}"),
+            "\"gone\"",
+        ),
         ("no variants", scene.to_string(), "no [[variant]]"),
         ("no scenes", variant.to_string(), "no [[scene]]"),
-        ("no seeds", format!("seeds = []\n{scene}{variant}"), "seeds = []"),
-        ("duplicate variants", format!("{scene}{variant}{variant}"), "duplicate variant name \"v\""),
-        ("names colliding on disk", format!("{scene}{variant}[[variant]]\nname = \"v?\"\n[[variant]]\nname = \"v!\"\n"), "same directory"),
-        ("duplicate seeds", format!("seeds = [1, 1]\n{scene}{variant}"), "listed twice"),
-        ("unknown paper variant", format!("[trade]\npaper = \"nope\"\n{scene}{variant}"), "trade.paper"),
+        (
+            "no seeds",
+            format!("seeds = []\n{scene}{variant}"),
+            "seeds = []",
+        ),
+        (
+            "duplicate variants",
+            format!("{scene}{variant}{variant}"),
+            "duplicate variant name \"v\"",
+        ),
+        (
+            "names colliding on disk",
+            format!("{scene}{variant}[[variant]]\nname = \"v?\"\n[[variant]]\nname = \"v!\"\n"),
+            "same directory",
+        ),
+        (
+            "duplicate seeds",
+            format!("seeds = [1, 1]\n{scene}{variant}"),
+            "listed twice",
+        ),
+        (
+            "unknown paper variant",
+            format!("[trade]\npaper = \"nope\"\n{scene}{variant}"),
+            "trade.paper",
+        ),
     ];
     for (what, body, needle) in cases {
         let plan = s.plan("bad", &body);
         let (ok, out) = s.sweep(&[plan.to_str().unwrap(), "--out", "bad_out"]);
         assert!(!ok, "{what}: accepted");
-        assert!(out.contains(needle), "{what}: the error does not name {needle:?}:\n{out}");
+        assert!(
+            out.contains(needle),
+            "{what}: the error does not name {needle:?}:\n{out}"
+        );
         assert!(!out.contains("panicked"), "{what}: {out}");
         assert!(!s.root.join("bad_out").exists(), "{what}: something ran");
     }
@@ -335,7 +423,10 @@ impl Cluster {
         if !missing.is_empty() {
             dispflow_vk::testing::skip(
                 "the Slurm sweep test",
-                &format!("{} not installed (bash tools/setup.sh installs them)", missing.join(", ")),
+                &format!(
+                    "{} not installed (bash tools/setup.sh installs them)",
+                    missing.join(", ")
+                ),
             );
             return None;
         }
@@ -343,7 +434,12 @@ impl Cluster {
             dir: dir.to_path_buf(),
             script,
         };
-        let out = Command::new("bash").arg(&c.script).arg("up").arg(dir).output().unwrap();
+        let out = Command::new("bash")
+            .arg(&c.script)
+            .arg("up")
+            .arg(dir)
+            .output()
+            .unwrap();
         assert!(
             out.status.success(),
             "slurm_local.sh up failed: {}{}",
@@ -386,7 +482,11 @@ impl Cluster {
 
 impl Drop for Cluster {
     fn drop(&mut self) {
-        let _ = Command::new("bash").arg(&self.script).arg("down").arg(&self.dir).status();
+        let _ = Command::new("bash")
+            .arg(&self.script)
+            .arg("down")
+            .arg(&self.dir)
+            .status();
     }
 }
 
@@ -399,11 +499,21 @@ fn the_slurm_path_runs_a_job_array_and_a_dependent_gather_job() {
     let plan = s.plan("tiny", &two_scenes());
     let out = s
         .cmd()
-        .args(["sweep", plan.to_str().unwrap(), "--out", "viaslurm", "--slurm", "--submit", "--jobs", "2"])
+        .args([
+            "sweep",
+            plan.to_str().unwrap(),
+            "--out",
+            "viaslurm",
+            "--slurm",
+            "--submit",
+            "--jobs",
+            "2",
+        ])
         .env("SLURM_CONF", cluster.conf())
         .output()
         .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{text}");
     assert!(text.contains("submitted array job"), "{text}");
     let dir = s.root.join("viaslurm");
@@ -424,11 +534,20 @@ fn the_slurm_path_runs_a_job_array_and_a_dependent_gather_job() {
     let (ok, text) = {
         let out = s
             .cmd()
-            .args(["sweep", plan.to_str().unwrap(), "--out", "failing", "--slurm"])
+            .args([
+                "sweep",
+                plan.to_str().unwrap(),
+                "--out",
+                "failing",
+                "--slurm",
+            ])
             .env("SLURM_CONF", cluster.conf())
             .output()
             .unwrap();
-        (out.status.success(), String::from_utf8_lossy(&out.stdout).to_string())
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).to_string(),
+        )
     };
     assert!(ok, "{text}");
     let mut damaged = 0;
@@ -447,7 +566,11 @@ fn the_slurm_path_runs_a_job_array_and_a_dependent_gather_job() {
             .current_dir(&s.root)
             .output()
             .unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         String::from_utf8_lossy(&out.stdout).trim().to_string()
     };
     let dir = s.root.join("failing");
@@ -457,7 +580,10 @@ fn the_slurm_path_runs_a_job_array_and_a_dependent_gather_job() {
         dir.join("slurm/gather.sbatch").to_str().unwrap(),
     ]);
     cluster.wait_empty(Duration::from_secs(300));
-    assert!(!dir.join("report.md").exists(), "the gather job ran after a failed cell");
+    assert!(
+        !dir.join("report.md").exists(),
+        "the gather job ran after a failed cell"
+    );
     assert!(dir.join("cells/moving/baseline/seed0/cell.json").is_file());
     assert!(!dir.join("cells/frozen/baseline/seed0/cell.json").exists());
 }

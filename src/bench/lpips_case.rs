@@ -2,7 +2,7 @@
 
 use super::*;
 
-use crate::eval::lpips::{random_weights, LpipsScorer};
+use crate::train::score::lpips::{random_weights, LpipsScorer};
 
 /// `WIDTHxHEIGHT` → (width, height).
 pub fn parse_size(s: &str) -> Result<(u32, u32)> {

@@ -6,10 +6,10 @@
 use std::path::PathBuf;
 
 use super::{median, BenchRow};
+use crate::data::builtin::builtin_scene;
 use crate::data::{self, synthetic::Preset as ScenePreset};
 use crate::error::Result;
 use crate::kernels::mlp_fused::FmaPeak;
-use crate::data::builtin::builtin_scene;
 use crate::train::config::{Preset, TrainConfig};
 use crate::train::Trainer;
 use crate::vk::{Gpu, Recorder, Timings};

@@ -35,4 +35,3 @@ pub fn builtin_scene(preset: Preset, seed: u64) -> Result<PathBuf> {
     }
     Ok(dir)
 }
-

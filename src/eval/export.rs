@@ -24,7 +24,10 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
 /// Writes `frames` (all one size) as a looping GIF at `fps` frames per second.
 pub fn write_gif(path: &Path, frames: &[RgbImage], fps: u32) -> Result<()> {
     let Some(first) = frames.first() else {
-        return Err(Error::Invalid(format!("{}: no frames to animate", path.display())));
+        return Err(Error::Invalid(format!(
+            "{}: no frames to animate",
+            path.display()
+        )));
     };
     if fps == 0 || fps > 100 {
         return Err(Error::Invalid(format!(
@@ -70,13 +73,19 @@ pub fn crc32(bytes: &[u8]) -> u32 {
         for (i, e) in t.iter_mut().enumerate() {
             let mut c = i as u32;
             for _ in 0..8 {
-                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
             }
             *e = c;
         }
         t
     });
-    !bytes.iter().fold(!0u32, |c, &b| t[((c ^ b as u32) & 0xff) as usize] ^ (c >> 8))
+    !bytes.iter().fold(!0u32, |c, &b| {
+        t[((c ^ b as u32) & 0xff) as usize] ^ (c >> 8)
+    })
 }
 
 /// Writes the files `entries` (name inside the archive, file on disk) as a stored zip. Sizes

@@ -4,9 +4,6 @@
 
 use std::path::{Path, PathBuf};
 
-use super::lpips::LpipsScorer;
-use super::report::{table, Report, ReportContext};
-use super::{FrameEval, FrameImages};
 use crate::data::{self, Dataset};
 use crate::error::{Error, Result};
 use crate::model::deform::MlpLayout;
@@ -16,8 +13,11 @@ use crate::model::nodes::FieldKind;
 use crate::model::state::{gaussian_blobs, mlp_config_of};
 use crate::report::{self, Plot, Series, PALETTE};
 use crate::train::checkpoint::{read_ply, write_atomic};
-use crate::train::outputs::LogLine;
 use crate::train::config::TrainConfig;
+use crate::train::metrics::{table, Report, ReportContext};
+use crate::train::outputs::{frame_png, read_log, training_plot, LogLine, DYN_ROW};
+use crate::train::score::lpips::{self, LpipsScorer};
+use crate::train::score::{FrameEval, FrameImages};
 use crate::train::Trainer;
 use crate::vk::Gpu;
 
@@ -33,21 +33,6 @@ pub struct Run {
     pub dynamic: Option<SplitSnapshot>,
     /// The control nodes (`nodes.bin`, [4M] f32) of a nodes-field run; `None` for the MLP field.
     pub nodes: Option<Vec<f32>>,
-}
-
-/// Floats per Gaussian in `dynamic.bin`: the flag (0.0 static, 1.0 dynamic), then the
-/// static deformation (dx 3, dr 4, ds 3) the Gaussian is drawn with while static.
-pub const DYN_ROW: usize = 11;
-
-/// `dynamic.bin`: little-endian f32 rows of [`DYN_ROW`], one per Gaussian of
-/// `point_cloud.ply`, in its order. Absent: every Gaussian dynamic.
-pub fn dynamic_bin(s: &SplitSnapshot) -> Vec<u8> {
-    let mut v = Vec::with_capacity(DYN_ROW * s.flags.len());
-    for (f, row) in s.flags.iter().zip(s.fixed.chunks_exact(10)) {
-        v.push(*f as f32);
-        v.extend_from_slice(row);
-    }
-    bytemuck::cast_slice(&v).to_vec()
 }
 
 fn invalid(path: &Path, why: impl std::fmt::Display) -> Error {
@@ -292,7 +277,7 @@ pub struct EvalArgs {
 pub fn run_eval(a: &EvalArgs) -> Result<Vec<Report>> {
     // A bad weight file fails before any run is opened or evaluated.
     let lpips_weights = match &a.lpips_weights {
-        Some(p) => Some((p.clone(), super::lpips::load_weights(p)?)),
+        Some(p) => Some((p.clone(), lpips::load_weights(p)?)),
         None => None,
     };
     // Every run is checked before the first (slow) evaluation starts.
@@ -434,21 +419,6 @@ pub fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
     pb
 }
 
-/// `NNN_<id>.png` with the id made file-name safe.
-pub fn frame_png(i: usize, id: &str) -> String {
-    let safe: String = id
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    format!("{i:03}_{safe}.png")
-}
-
 /// render | ground truth | error | displacement flow | optical flow (frozen render → ground
 /// truth) | motion mask (when present).
 pub fn frame_strip(im: &FrameImages) -> Result<image::RgbImage> {
@@ -516,119 +486,4 @@ fn per_frame_plot(per: &[FrameEval]) -> Result<image::RgbImage> {
         height: 240,
     };
     report::stacked(&[psnr.render()?, motion.render()?])
-}
-
-type LogValue<'a> = (&'a str, &'a dyn Fn(&LogLine) -> Option<f64>);
-
-/// Probe values of the log against iterations, a series each.
-fn probe_plot(
-    title: &str,
-    y: &str,
-    log: &[LogLine],
-    series: &[LogValue<'_>],
-) -> Result<image::RgbImage> {
-    Plot {
-        title: title.into(),
-        x_label: "iteration".into(),
-        y_label: y.into(),
-        series: series
-            .iter()
-            .enumerate()
-            .map(|(c, (label, f))| Series {
-                label: label.to_string(),
-                points: log
-                    .iter()
-                    .filter_map(|l| f(l).map(|v| (l.iteration as f64, v)))
-                    .collect(),
-                color: PALETTE[c % PALETTE.len()],
-            })
-            .collect(),
-        width: 640,
-        height: 200,
-    }
-    .render()
-}
-
-/// Reads a run's `log.jsonl`, naming the line of a malformed entry.
-pub fn read_log(path: &Path) -> Result<Vec<LogLine>> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
-    text.lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(i, l)| {
-            serde_json::from_str(l).map_err(|e| invalid(path, format!("line {}: {e}", i + 1)))
-        })
-        .collect()
-}
-
-/// Loss, training-view PSNR (with the worst view of each interval), Gaussians against
-/// iterations, and the test-PSNR probe against training seconds (when the log has it).
-pub fn training_plot(log: &[LogLine]) -> Result<image::RgbImage> {
-    let plot = |title: &str, y: &str, f: &dyn Fn(&LogLine) -> f64, c: usize| Plot {
-        title: title.into(),
-        x_label: "iteration".into(),
-        y_label: y.into(),
-        series: vec![Series {
-            label: String::new(),
-            points: log.iter().map(|l| (l.iteration as f64, f(l))).collect(),
-            color: PALETTE[c],
-        }],
-        width: 640,
-        height: 200,
-    };
-    let mut view = plot("training-view PSNR", "PSNR (dB)", &|l| l.psnr, 1);
-    if log.iter().any(|l| l.worst_psnr.is_some()) {
-        view.series[0].label = "logged view".into();
-        view.series.push(Series {
-            label: "worst view of the interval".into(),
-            points: log
-                .iter()
-                .filter_map(|l| l.worst_psnr.map(|p| (l.iteration as f64, p)))
-                .collect(),
-            color: PALETTE[3],
-        });
-    }
-    let mut plots = vec![
-        plot("training loss", "loss", &|l| l.loss, 0).render()?,
-        view.render()?,
-        plot("Gaussians", "count", &|l| l.num_gaussians as f64, 2).render()?,
-    ];
-    if log.iter().any(|l| l.test_psnr.is_some()) {
-        plots.push(crate::train::curve::psnr_time_plot(
-            &[(String::new(), log)],
-            640,
-            200,
-        )?);
-    }
-    if log.iter().any(|l| l.test_dynamic_psnr.is_some()) {
-        plots.push(probe_plot(
-            "test PSNR by region (probe frames)",
-            "PSNR (dB)",
-            log,
-            &[
-                ("whole image", &|l| l.test_psnr),
-                ("dynamic (dilated mask)", &|l| l.test_dynamic_psnr),
-                ("static", &|l| l.test_static_psnr),
-            ],
-        )?);
-    }
-    if log.iter().any(|l| l.motion_epe.is_some()) {
-        plots.push(probe_plot(
-            "the model's motion against the ground-truth flow (probe frames)",
-            "pixels",
-            log,
-            &[
-                ("EPE inside the masks", &|l| l.motion_epe),
-                ("ground-truth flow length (EPE of no motion)", &|l| {
-                    l.motion_gt_px
-                }),
-                ("Gaussians' motion p50", &|l| l.motion_p50_px),
-                ("Gaussians' motion p99", &|l| l.motion_p99_px),
-            ],
-        )?);
-    }
-    report::stacked(&plots)
 }

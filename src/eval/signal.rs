@@ -12,7 +12,6 @@ use std::path::PathBuf;
 use serde::Serialize;
 
 use super::run::open_run;
-use super::ModelView;
 use crate::data;
 use crate::error::{Error, Result};
 use crate::kernels::dispflow::DispFlow;
@@ -27,6 +26,7 @@ use crate::train::passes::motion::{OpticalFlow, OracleFlow};
 use crate::train::passes::{
     DeformPass, MotionPair, OverflowWatch, RenderPass, SceneMotion, SceneSignal, Slot,
 };
+use crate::train::score::ModelView;
 use crate::train::step::ALPHA_MAX;
 use crate::train::Trainer;
 use crate::vk::{BufSlice, Buffer, Gpu, Recorder};

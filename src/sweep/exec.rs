@@ -83,7 +83,11 @@ impl CellEnv {
             write_atomic(&dir.join(TRAIN_OK), b"")?;
         }
         if !dir.join(EVAL_OK).is_file() {
-            let mut a = vec!["eval".to_string(), "--run".into(), run.display().to_string()];
+            let mut a = vec![
+                "eval".to_string(),
+                "--run".into(),
+                run.display().to_string(),
+            ];
             if let Some(w) = &self.lpips {
                 a.extend(["--lpips-weights".into(), w.display().to_string()]);
             }
@@ -145,7 +149,10 @@ impl CellEnv {
         let f = |v: &serde_json::Value, k: &str| v.get(k).and_then(serde_json::Value::as_f64);
         let need = |k: &str| {
             f(&eval, k).ok_or_else(|| {
-                Error::Invalid(format!("{}: no number {k:?}", run.join("eval/metrics.json").display()))
+                Error::Invalid(format!(
+                    "{}: no number {k:?}",
+                    run.join("eval/metrics.json").display()
+                ))
             })
         };
         let s = |v: &serde_json::Value, k: &str| {

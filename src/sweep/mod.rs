@@ -104,9 +104,10 @@ pub fn run(a: &SweepArgs) -> Result<()> {
         );
         return Ok(());
     }
-    let path = a.plan.as_deref().ok_or_else(|| {
-        Error::Invalid("sweep: give a plan file (or `sweep report DIR`)".into())
-    })?;
+    let path = a
+        .plan
+        .as_deref()
+        .ok_or_else(|| Error::Invalid("sweep: give a plan file (or `sweep report DIR`)".into()))?;
     let (plan, cells) = Plan::load(path)?;
     let root = plan.out_dir(a.out.as_deref());
     let jobs = a.jobs.or(plan.jobs).unwrap_or(1);
@@ -181,7 +182,9 @@ pub fn run(a: &SweepArgs) -> Result<()> {
         if a.submit {
             let (array, gather) = slurm::submit(&s, !todo.is_empty())?;
             match array {
-                Some(id) => println!("submitted array job {id} and gather job {gather} (afterok:{id})"),
+                Some(id) => {
+                    println!("submitted array job {id} and gather job {gather} (afterok:{id})")
+                }
                 None => println!("every cell has finished; submitted gather job {gather}"),
             }
         } else {
@@ -260,9 +263,8 @@ pub fn report(a: &ReportArgs) -> Result<Vec<CellResult>> {
     let recorded: Option<SweepMeta> = std::fs::read_to_string(a.dir.join(META))
         .ok()
         .map(|t| {
-            serde_json::from_str(&t).map_err(|e| {
-                Error::Invalid(format!("{}: {e}", a.dir.join(META).display()))
-            })
+            serde_json::from_str(&t)
+                .map_err(|e| Error::Invalid(format!("{}: {e}", a.dir.join(META).display())))
         })
         .transpose()?;
     let (tables, trade, order) = match (&a.plan, &recorded) {
@@ -310,7 +312,10 @@ pub fn write_report(
         let t = grid.table(k, trade.tolerance_db, trade.paper.as_deref());
         let text = t.to_markdown();
         write_atomic(&dir.join(format!("{}.md", k.name())), text.as_bytes())?;
-        write_atomic(&dir.join(format!("{}.csv", k.name())), t.to_csv().as_bytes())?;
+        write_atomic(
+            &dir.join(format!("{}.csv", k.name())),
+            t.to_csv().as_bytes(),
+        )?;
         md += &format!("\n## {}\n\n{text}", title(k));
         if k == TableKind::Trade && grid.scenes.iter().any(|s| !grid.trade_points(s).is_empty()) {
             crate::report::save_png(&grid.pareto_plot(900)?, &root.join("pareto.png"))?;

@@ -144,7 +144,10 @@ pub struct Cell {
 
 /// Flags a plan may not set: the sweep owns them.
 const OWNED: [(&str, &str); 5] = [
-    ("out", "each cell trains into its own directory under the sweep's out"),
+    (
+        "out",
+        "each cell trains into its own directory under the sweep's out",
+    ),
     ("resume", "every cell resumes from its checkpoint"),
     ("seed", "use the plan's seeds = [...]"),
     ("data", "use a [[scene]]'s data ="),
@@ -195,7 +198,9 @@ impl Plan {
     }
 
     pub fn lpips_path(&self, base: &Path) -> Option<PathBuf> {
-        self.lpips_weights.as_deref().map(|p| Self::resolve(base, p))
+        self.lpips_weights
+            .as_deref()
+            .map(|p| Self::resolve(base, p))
     }
 
     /// Expands the grid in plan order (scene, then variant, then seed) and checks every cell.
@@ -317,7 +322,10 @@ fn unique<'a>(what: &str, names: impl Iterator<Item = &'a str>) -> std::result::
             return Err(if prev == n {
                 format!("duplicate {what} name {n:?}")
             } else {
-                format!("{what} names {prev:?} and {n:?} map to the same directory {:?}", safe(n))
+                format!(
+                    "{what} names {prev:?} and {n:?} map to the same directory {:?}",
+                    safe(n)
+                )
             });
         }
     }
@@ -334,7 +342,10 @@ fn unique_seeds(seeds: &[u64]) -> std::result::Result<(), String> {
 }
 
 /// Every flag must be one of `train`'s and not one the sweep owns.
-fn check_flags(what: &str, flags: &BTreeMap<String, toml::Value>) -> std::result::Result<(), String> {
+fn check_flags(
+    what: &str,
+    flags: &BTreeMap<String, toml::Value>,
+) -> std::result::Result<(), String> {
     let cmd = TrainOnly::command();
     for k in flags.keys() {
         if let Some((_, why)) = OWNED.iter().find(|(o, _)| o == k) {
@@ -378,7 +389,9 @@ fn to_args(flags: &BTreeMap<String, toml::Value>) -> std::result::Result<Vec<Str
             }
         };
         if switch {
-            return Err(format!("flags.{k} = {v}: --{k} is a switch; write true or false"));
+            return Err(format!(
+                "flags.{k} = {v}: --{k} is a switch; write true or false"
+            ));
         }
         out.extend([format!("--{k}"), value]);
     }
@@ -389,7 +402,11 @@ fn to_args(flags: &BTreeMap<String, toml::Value>) -> std::result::Result<Vec<Str
 fn check_cell(args: &[String], config_toml: &str, what: &str) -> std::result::Result<(), String> {
     let parsed = TrainOnly::try_parse_from(args).map_err(|e| {
         let msg = e.to_string();
-        let first = msg.lines().next().unwrap_or("").trim_start_matches("error: ");
+        let first = msg
+            .lines()
+            .next()
+            .unwrap_or("")
+            .trim_start_matches("error: ");
         format!("{what}: flags {}: {first}", args.join(" "))
     })?;
     let extra = (!config_toml.is_empty()).then_some((config_toml, "config table"));

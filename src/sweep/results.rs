@@ -66,7 +66,11 @@ pub fn read_results(path: &Path) -> Result<Vec<CellResult>> {
         .filter(|(_, l)| !l.trim().is_empty())
         .map(|(i, l)| {
             serde_json::from_str(l).map_err(|e| {
-                Error::Invalid(format!("{} line {}: not a cell result: {e}", path.display(), i + 1))
+                Error::Invalid(format!(
+                    "{} line {}: not a cell result: {e}",
+                    path.display(),
+                    i + 1
+                ))
             })
         })
         .collect()
@@ -130,7 +134,12 @@ pub fn gather(root: &Path, order: &[String]) -> Result<Vec<CellResult>> {
         .iter()
         .map(|f| read_cell(f))
         .collect::<Result<Vec<_>>>()?;
-    let pos = |r: &CellResult| order.iter().position(|k| *k == r.cell).unwrap_or(usize::MAX);
+    let pos = |r: &CellResult| {
+        order
+            .iter()
+            .position(|k| *k == r.cell)
+            .unwrap_or(usize::MAX)
+    };
     results.sort_by_key(|r| pos(r));
     write_results(root, &results)?;
     Ok(results)

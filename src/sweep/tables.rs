@@ -79,7 +79,11 @@ impl SweepTable {
     pub fn to_csv(&self) -> String {
         let mut head = Vec::new();
         let numeric: Vec<bool> = (0..self.headers.len())
-            .map(|i| self.rows.iter().any(|r| matches!(r.get(i), Some(Val::Num(..)))))
+            .map(|i| {
+                self.rows
+                    .iter()
+                    .any(|r| matches!(r.get(i), Some(Val::Num(..))))
+            })
             .collect();
         for (h, &num) in self.headers.iter().zip(&numeric) {
             head.push(csv_field(h));
@@ -210,7 +214,11 @@ impl<'a> Grid<'a> {
                     row.extend(metrics.iter().map(|m| Val::Num(self.stat(s, v, m.1), m.2)));
                 }
                 if several {
-                    row.extend(metrics.iter().map(|m| Val::Num(self.across_scenes(v, m.1), m.2)));
+                    row.extend(
+                        metrics
+                            .iter()
+                            .map(|m| Val::Num(self.across_scenes(v, m.1), m.2)),
+                    );
                 }
                 row
             })
@@ -232,7 +240,11 @@ impl<'a> Grid<'a> {
             .iter()
             .map(|v| {
                 let mut row = vec![Val::Text(v.clone())];
-                row.extend(metrics.iter().map(|m| Val::Num(self.across_scenes(v, m.1), m.2)));
+                row.extend(
+                    metrics
+                        .iter()
+                        .map(|m| Val::Num(self.across_scenes(v, m.1), m.2)),
+                );
                 row
             })
             .collect();
@@ -427,7 +439,12 @@ mod tests {
     #[test]
     fn pareto_keeps_the_undominated_points() {
         let p = |n: &str, t, q| (n.to_string(), t, q);
-        let pts = [p("a", 10.0, 20.0), p("b", 5.0, 19.0), p("c", 12.0, 19.5), p("d", 5.0, 19.0)];
+        let pts = [
+            p("a", 10.0, 20.0),
+            p("b", 5.0, 19.0),
+            p("c", 12.0, 19.5),
+            p("d", 5.0, 19.0),
+        ];
         // c is dominated by a; b and d tie and neither dominates the other.
         assert_eq!(pareto(&pts), vec![true, true, false, true]);
     }

@@ -8,7 +8,7 @@ use super::session::{train_run, Bar, RunSpec};
 use crate::data::builtin::builtin_scene;
 use crate::data::synthetic::Preset as ScenePreset;
 use crate::error::Result;
-use crate::eval::report::Report;
+use crate::train::metrics::Report;
 use crate::vk::Gpu;
 
 #[derive(clap::Args, Debug, Clone, Default)]

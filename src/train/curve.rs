@@ -35,10 +35,13 @@ pub struct Probe {
 }
 
 impl Probe {
-    pub fn of(frames: &[crate::eval::FrameEval], motion: &[crate::eval::epe::MotionProbe]) -> Self {
-        use crate::eval::report::mean_some as mean_of;
+    pub fn of(
+        frames: &[crate::train::score::FrameEval],
+        motion: &[crate::train::score::epe::MotionProbe],
+    ) -> Self {
+        use crate::train::metrics::mean_some as mean_of;
         Probe {
-            psnr: crate::eval::report::mean(frames.iter().map(|f| f.psnr)),
+            psnr: crate::train::metrics::mean(frames.iter().map(|f| f.psnr)),
             dynamic_psnr: mean_of(frames.iter().map(|f| f.dynamic_psnr)),
             static_psnr: mean_of(frames.iter().map(|f| f.static_psnr)),
             epe: mean_of(motion.iter().map(|m| m.epe)),

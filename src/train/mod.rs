@@ -1,7 +1,7 @@
 //! Training: the [`Trainer`] loop around a step that reads as a list of pass calls
 //! ([`step::record_step`]): a pure per-iteration [`plan::StepPlan`], passes that own their
 //! pipelines and scratch ([`passes`]), the model state in [`crate::model::state`], density
-//! control at its cadence, checkpoints. Evaluation lives in [`crate::eval`] with its own scratch.
+//! control at its cadence, checkpoints. Scoring a frame lives in [`score`] with its own scratch; the commands that reopen a run (`crate::eval`) sit above this module.
 
 pub mod checkpoint;
 pub mod cli;
@@ -12,9 +12,11 @@ pub mod frames;
 pub mod guard;
 pub mod init;
 pub mod method;
+pub mod metrics;
 pub mod outputs;
 pub mod passes;
 pub mod plan;
+pub mod score;
 pub mod session;
 pub mod step;
 
@@ -22,8 +24,6 @@ use std::rc::Rc;
 
 use crate::data::Dataset;
 use crate::error::{Error, Result};
-use crate::eval::lpips::LpipsScorer;
-use crate::eval::{Evaluator, FrameEval, ModelView};
 use crate::kernels::loss::LossValues;
 use crate::kernels::motion::NormConfig;
 use crate::kernels::raster::{Camera, Rasterizer};
@@ -31,6 +31,8 @@ use crate::model::dynamic::DynamicSet;
 use crate::model::gaussians::HostGaussians;
 use crate::model::nodes::{FieldKind, NodeState};
 use crate::model::state::{mlp_config_of, DeformState, GaussianState, Model};
+use crate::train::score::lpips::LpipsScorer;
+use crate::train::score::{Evaluator, FrameEval, ModelView};
 use crate::vk::{Gpu, Recorder, Timings};
 use checkpoint::Checkpoint;
 use config::{
@@ -401,7 +403,10 @@ impl<'g> Trainer<'g> {
 
     /// The displacement EPE probe of test frame `i` (`None` without a mask and ground-truth
     /// flow towards a next time).
-    pub fn motion_probe(&mut self, i: usize) -> Result<Option<crate::eval::epe::MotionProbe>> {
+    pub fn motion_probe(
+        &mut self,
+        i: usize,
+    ) -> Result<Option<crate::train::score::epe::MotionProbe>> {
         let view = self.view();
         let gpu = self.gpu;
         self.evaluator()?;

@@ -1,6 +1,6 @@
 //! What a training run writes besides its model: `log.jsonl` lines (and cutting them back on
 //! resume), side-by-side PNGs, the dynamic-mask pictures, and the clean-up of what a killed
-//! run leaves behind.
+//! run leaves behind; reading `log.jsonl` back and drawing `training.png`; `dynamic.bin`.
 
 use std::path::Path;
 
@@ -9,7 +9,8 @@ use serde::Serialize;
 use super::checkpoint::write_atomic;
 use super::Trainer;
 use crate::error::{Error, Result};
-use crate::eval::run::frame_png;
+use crate::model::dynamic::SplitSnapshot;
+use crate::report::{self, Plot, Series, PALETTE};
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
     move |source| Error::Io {
@@ -158,4 +159,150 @@ pub fn save_side_by_side(path: &Path, w: u32, h: u32, images: &[&[[f32; 4]]]) ->
         image::Rgb([0, 1, 2].map(|c| (p[c].clamp(0.0, 1.0) * 255.0).round() as u8))
     });
     crate::report::save_png(&img, path)
+}
+
+/// Floats per Gaussian in `dynamic.bin`: the flag (0.0 static, 1.0 dynamic), then the
+/// static deformation (dx 3, dr 4, ds 3) the Gaussian is drawn with while static.
+pub const DYN_ROW: usize = 11;
+
+/// `dynamic.bin`: little-endian f32 rows of [`DYN_ROW`], one per Gaussian of
+/// `point_cloud.ply`, in its order. Absent: every Gaussian dynamic.
+pub fn dynamic_bin(s: &SplitSnapshot) -> Vec<u8> {
+    let mut v = Vec::with_capacity(DYN_ROW * s.flags.len());
+    for (f, row) in s.flags.iter().zip(s.fixed.chunks_exact(10)) {
+        v.push(*f as f32);
+        v.extend_from_slice(row);
+    }
+    bytemuck::cast_slice(&v).to_vec()
+}
+
+/// `NNN_<id>.png` with the id made file-name safe.
+pub fn frame_png(i: usize, id: &str) -> String {
+    let safe: String = id
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("{i:03}_{safe}.png")
+}
+
+/// Reads a run's `log.jsonl`, naming the line of a malformed entry.
+pub fn read_log(path: &Path) -> Result<Vec<LogLine>> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, l)| {
+            serde_json::from_str(l)
+                .map_err(|e| Error::Invalid(format!("{}: line {}: {e}", path.display(), i + 1)))
+        })
+        .collect()
+}
+
+/// Loss, training-view PSNR (with the worst view of each interval), Gaussians against
+/// iterations, and the test-PSNR probe against training seconds (when the log has it).
+pub fn training_plot(log: &[LogLine]) -> Result<image::RgbImage> {
+    let plot = |title: &str, y: &str, f: &dyn Fn(&LogLine) -> f64, c: usize| Plot {
+        title: title.into(),
+        x_label: "iteration".into(),
+        y_label: y.into(),
+        series: vec![Series {
+            label: String::new(),
+            points: log.iter().map(|l| (l.iteration as f64, f(l))).collect(),
+            color: PALETTE[c],
+        }],
+        width: 640,
+        height: 200,
+    };
+    let mut view = plot("training-view PSNR", "PSNR (dB)", &|l| l.psnr, 1);
+    if log.iter().any(|l| l.worst_psnr.is_some()) {
+        view.series[0].label = "logged view".into();
+        view.series.push(Series {
+            label: "worst view of the interval".into(),
+            points: log
+                .iter()
+                .filter_map(|l| l.worst_psnr.map(|p| (l.iteration as f64, p)))
+                .collect(),
+            color: PALETTE[3],
+        });
+    }
+    let mut plots = vec![
+        plot("training loss", "loss", &|l| l.loss, 0).render()?,
+        view.render()?,
+        plot("Gaussians", "count", &|l| l.num_gaussians as f64, 2).render()?,
+    ];
+    if log.iter().any(|l| l.test_psnr.is_some()) {
+        plots.push(crate::train::curve::psnr_time_plot(
+            &[(String::new(), log)],
+            640,
+            200,
+        )?);
+    }
+    if log.iter().any(|l| l.test_dynamic_psnr.is_some()) {
+        plots.push(probe_plot(
+            "test PSNR by region (probe frames)",
+            "PSNR (dB)",
+            log,
+            &[
+                ("whole image", &|l| l.test_psnr),
+                ("dynamic (dilated mask)", &|l| l.test_dynamic_psnr),
+                ("static", &|l| l.test_static_psnr),
+            ],
+        )?);
+    }
+    if log.iter().any(|l| l.motion_epe.is_some()) {
+        plots.push(probe_plot(
+            "the model's motion against the ground-truth flow (probe frames)",
+            "pixels",
+            log,
+            &[
+                ("EPE inside the masks", &|l| l.motion_epe),
+                ("ground-truth flow length (EPE of no motion)", &|l| {
+                    l.motion_gt_px
+                }),
+                ("Gaussians' motion p50", &|l| l.motion_p50_px),
+                ("Gaussians' motion p99", &|l| l.motion_p99_px),
+            ],
+        )?);
+    }
+    report::stacked(&plots)
+}
+
+type LogValue<'a> = (&'a str, &'a dyn Fn(&LogLine) -> Option<f64>);
+
+/// Probe values of the log against iterations, a series each.
+fn probe_plot(
+    title: &str,
+    y: &str,
+    log: &[LogLine],
+    series: &[LogValue<'_>],
+) -> Result<image::RgbImage> {
+    Plot {
+        title: title.into(),
+        x_label: "iteration".into(),
+        y_label: y.into(),
+        series: series
+            .iter()
+            .enumerate()
+            .map(|(c, (label, f))| Series {
+                label: label.to_string(),
+                points: log
+                    .iter()
+                    .filter_map(|l| f(l).map(|v| (l.iteration as f64, v)))
+                    .collect(),
+                color: PALETTE[c % PALETTE.len()],
+            })
+            .collect(),
+        width: 640,
+        height: 200,
+    }
+    .render()
 }

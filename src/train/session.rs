@@ -7,13 +7,13 @@ use std::time::Instant;
 
 use super::checkpoint::{kept_checkpoint, last_checkpoint, write_atomic, write_ply, Checkpoint};
 use super::config::TrainConfig;
+use super::outputs::frame_png;
 use super::outputs::{last_wall_s, remove_stale_outputs, truncate_log};
 use super::outputs::{save_side_by_side, write_dynamic_masks, LogLine};
 use super::Trainer;
 use crate::data;
 use crate::error::{Error, Result};
-use crate::eval::report::{mean, Report, ReportContext};
-use crate::eval::run::frame_png;
+use crate::train::metrics::{mean, Report, ReportContext};
 use crate::vk::Gpu;
 
 /// What one training run needs besides the device.
@@ -405,7 +405,7 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
     }
     let dynamic_bin = out.join("dynamic.bin");
     match tr.model.dynamic.download(gpu, tr.n())? {
-        Some(d) => write_atomic(&dynamic_bin, &crate::eval::run::dynamic_bin(&d))?,
+        Some(d) => write_atomic(&dynamic_bin, &super::outputs::dynamic_bin(&d))?,
         None if dynamic_bin.is_file() => {
             std::fs::remove_file(&dynamic_bin).map_err(io(&dynamic_bin))?
         }
@@ -427,18 +427,18 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
     metrics.train_seconds = Some(wall_before + step_ms.iter().sum::<f64>() / 1e3);
     metrics.ms_per_step_by_phase = phase_ms
         .into_iter()
-        .map(|(phase, v)| crate::eval::report::PhaseMs {
+        .map(|(phase, v)| crate::train::metrics::PhaseMs {
             phase,
             steps: v.len() as u32,
             median_ms: crate::bench::median(v),
         })
         .collect();
     metrics.mean_dynamic_fraction = (dyn_sum.1 > 0).then(|| dyn_sum.0 / dyn_sum.1 as f64);
-    let log = crate::eval::run::read_log(&log_path)?;
+    let log = super::outputs::read_log(&log_path)?;
     metrics.time_to_psnr = super::curve::time_to_psnr(&log);
     metrics.collapses = log.iter().filter_map(|l| l.collapse.clone()).collect();
     crate::report::save_png(
-        &crate::eval::run::training_plot(&log)?,
+        &super::outputs::training_plot(&log)?,
         &out.join("training.png"),
     )?;
     write_atomic(&out.join("metrics.json"), metrics.to_json().as_bytes())?;

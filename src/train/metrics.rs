@@ -3,7 +3,7 @@
 
 use serde::Serialize;
 
-use super::FrameEval;
+use super::score::FrameEval;
 use crate::report::{self, Table};
 use crate::train::config::{DeformMode, NormGrad, TrainConfig};
 
