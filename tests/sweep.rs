@@ -600,3 +600,31 @@ fn walk(d: &Path) -> Vec<PathBuf> {
     }
     out
 }
+
+#[test]
+fn the_shipped_plans_are_valid() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    if !root.join("../shared/data").is_dir() {
+        dispflow_vk::testing::skip("the shipped plans' check", "../shared/data is missing");
+        return;
+    }
+    let mut plans: Vec<PathBuf> = std::fs::read_dir(root.join("tools/plans"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    plans.sort();
+    assert!(plans.len() >= 3, "{plans:?}");
+    for p in plans {
+        let out = Command::new(env!("CARGO_BIN_EXE_dispflow-vk"))
+            .args(["sweep", "--dry-run", "--out", "/nonexistent/never-written"])
+            .arg(&p)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).to_string()
+            + &String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{}: {text}", p.display());
+        assert!(text.lines().count() >= 4, "{}: {text}", p.display());
+    }
+}
