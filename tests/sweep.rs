@@ -88,7 +88,16 @@ impl Setup {
 
     /// `sweep ARGS…`: (success, stdout + stderr).
     fn sweep(&self, args: &[&str]) -> (bool, String) {
-        let out = self.cmd().arg("sweep").args(args).output().unwrap();
+        self.sweep_on(args, None)
+    }
+
+    /// `sweep ARGS…` with `SLURM_CONF` set when a cluster is given.
+    fn sweep_on(&self, args: &[&str], slurm_conf: Option<&Path>) -> (bool, String) {
+        let mut c = self.cmd();
+        if let Some(conf) = slurm_conf {
+            c.env("SLURM_CONF", conf);
+        }
+        let out = c.arg("sweep").args(args).output().unwrap();
         let text = format!(
             "{}{}",
             String::from_utf8_lossy(&out.stdout),
@@ -497,10 +506,9 @@ fn the_slurm_path_runs_a_job_array_and_a_dependent_gather_job() {
         return;
     };
     let plan = s.plan("tiny", &two_scenes());
-    let out = s
-        .cmd()
-        .args([
-            "sweep",
+    let conf = cluster.conf();
+    let (ok, text) = s.sweep_on(
+        &[
             plan.to_str().unwrap(),
             "--out",
             "viaslurm",
@@ -508,13 +516,10 @@ fn the_slurm_path_runs_a_job_array_and_a_dependent_gather_job() {
             "--submit",
             "--jobs",
             "2",
-        ])
-        .env("SLURM_CONF", cluster.conf())
-        .output()
-        .unwrap();
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{text}");
+        ],
+        Some(&conf),
+    );
+    assert!(ok, "{text}");
     assert!(text.contains("submitted array job"), "{text}");
     let dir = s.root.join("viaslurm");
     let script = std::fs::read_to_string(dir.join("slurm/cells.sbatch")).unwrap();
@@ -531,24 +536,10 @@ fn the_slurm_path_runs_a_job_array_and_a_dependent_gather_job() {
     // written scripts by hand after the frozen scene's images have been damaged (the plan
     // still loads; its cells' training refuses the dataset).
     let plan = s.plan("failing", &two_scenes());
-    let (ok, text) = {
-        let out = s
-            .cmd()
-            .args([
-                "sweep",
-                plan.to_str().unwrap(),
-                "--out",
-                "failing",
-                "--slurm",
-            ])
-            .env("SLURM_CONF", cluster.conf())
-            .output()
-            .unwrap();
-        (
-            out.status.success(),
-            String::from_utf8_lossy(&out.stdout).to_string(),
-        )
-    };
+    let (ok, text) = s.sweep_on(
+        &[plan.to_str().unwrap(), "--out", "failing", "--slurm"],
+        Some(&conf),
+    );
     assert!(ok, "{text}");
     let mut damaged = 0;
     for e in walk(&s.root.join("frozen")) {

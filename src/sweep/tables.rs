@@ -194,6 +194,16 @@ impl<'a> Grid<'a> {
         stat(per_seed)
     }
 
+    fn across_scene_vals<'m>(
+        &'m self,
+        variant: &'m str,
+        metrics: &'m [(&str, Metric, usize)],
+    ) -> impl Iterator<Item = Val> + 'm {
+        metrics
+            .iter()
+            .map(move |m| Val::Num(self.across_scenes(variant, m.1), m.2))
+    }
+
     /// Rows = variants; per scene one column per metric, then their means over scenes when
     /// there are several scenes.
     fn per_scene(&self, kind: TableKind, metrics: &[(&str, Metric, usize)]) -> SweepTable {
@@ -214,11 +224,7 @@ impl<'a> Grid<'a> {
                     row.extend(metrics.iter().map(|m| Val::Num(self.stat(s, v, m.1), m.2)));
                 }
                 if several {
-                    row.extend(
-                        metrics
-                            .iter()
-                            .map(|m| Val::Num(self.across_scenes(v, m.1), m.2)),
-                    );
+                    row.extend(self.across_scene_vals(v, metrics));
                 }
                 row
             })
@@ -240,11 +246,7 @@ impl<'a> Grid<'a> {
             .iter()
             .map(|v| {
                 let mut row = vec![Val::Text(v.clone())];
-                row.extend(
-                    metrics
-                        .iter()
-                        .map(|m| Val::Num(self.across_scenes(v, m.1), m.2)),
-                );
+                row.extend(self.across_scene_vals(v, &metrics));
                 row
             })
             .collect();
