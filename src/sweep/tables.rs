@@ -262,10 +262,35 @@ impl<'a> Grid<'a> {
         }
     }
 
-    /// The (train seconds, PSNR) means of every variant of `scene` that has both.
+    /// The resolution the scene's cells are scored at most often (`max_resolution`, 0 =
+    /// as stored): PSNR at another resolution measures another image and is not compared.
+    fn reference_resolution(&self, scene: &str) -> Option<i64> {
+        let mut counts: Vec<(i64, usize)> = Vec::new();
+        for r in self.results.iter().filter(|r| r.scene == scene) {
+            let res = scored_at(r);
+            match counts.iter_mut().find(|c| c.0 == res) {
+                Some(c) => c.1 += 1,
+                None => counts.push((res, 1)),
+            }
+        }
+        // The most frequent; on a tie the first seen (plan order).
+        let best = counts.iter().map(|c| c.1).max()?;
+        counts.iter().find(|c| c.1 == best).map(|c| c.0)
+    }
+
+    /// Whether every cell of (scene, variant) is scored at the scene's reference resolution.
+    fn comparable(&self, scene: &str, variant: &str) -> bool {
+        let want = self.reference_resolution(scene);
+        self.cells(scene, variant)
+            .all(|r| Some(scored_at(r)) == want)
+    }
+
+    /// The (train seconds, PSNR) means of every variant of `scene` that has both and is
+    /// scored at the scene's reference resolution.
     pub fn trade_points(&self, scene: &str) -> Vec<(String, f64, f64)> {
         self.variants
             .iter()
+            .filter(|v| self.comparable(scene, v))
             .filter_map(|v| {
                 let t = self.stat(scene, v, TRAIN_S.1)?;
                 let p = self.stat(scene, v, PSNR.1)?;
@@ -294,7 +319,15 @@ impl<'a> Grid<'a> {
                 let mut row = vec![Val::Text(s.clone()), Val::Text(v.clone())];
                 row.extend(metrics.iter().map(|m| Val::Num(self.stat(s, v, m.1), m.2)));
                 let on = pts.iter().zip(&front).any(|(p, &f)| f && p.0 == *v);
-                row.push(Val::Text(if on { "✓".into() } else { String::new() }));
+                let mark = if !self.comparable(s, v) {
+                    let res = self.cells(s, v).next().map_or(0, scored_at);
+                    format!("scored at {}: not compared", px(res))
+                } else if on {
+                    "✓".into()
+                } else {
+                    String::new()
+                };
+                row.push(Val::Text(mark));
                 rows.push(row);
             }
             if let Some(best) = pts.iter().max_by(|a, b| a.2.total_cmp(&b.2)) {
@@ -307,13 +340,18 @@ impl<'a> Grid<'a> {
                     .filter(|p| p.2 >= best.2 - tolerance_db)
                     .min_by(|a, b| a.1.total_cmp(&b.1))
                 {
+                    let gain = if fast.0 == best.0 {
+                        "the most accurate itself".to_string()
+                    } else {
+                        format!(
+                            "{:.1}× less training time than the most accurate",
+                            best.1 / fast.1.max(1e-9)
+                        )
+                    };
                     notes.push(format!(
                         "**{s}**: fastest acceptable (within {tolerance_db} dB of the best): {} \
-                         ({:.2} dB, {:.1} s, {:.1}× less training time than the most accurate).",
-                        fast.0,
-                        fast.2,
-                        fast.1,
-                        best.1 / fast.1.max(1e-9)
+                         ({:.2} dB, {:.1} s, {gain}).",
+                        fast.0, fast.2, fast.1,
                     ));
                 }
                 if let Some(p) = paper.and_then(|p| pts.iter().find(|x| x.0 == p)) {
@@ -326,7 +364,9 @@ impl<'a> Grid<'a> {
         }
         notes.push(format!(
             "Pareto: no other variant of the scene trains in less time with a higher PSNR \
-             (means over seeds). {}",
+             (means over seeds). Only cells scored at the scene's usual resolution are \
+             compared: a lower `max_resolution` is scored on a smaller image, whose PSNR is not \
+             the same measurement. {}",
             seed_note(self.results)
         ));
         SweepTable {
@@ -393,8 +433,29 @@ impl<'a> Grid<'a> {
     }
 }
 
+/// The `max_resolution` a cell was trained and scored at (0 = as stored).
+fn scored_at(r: &CellResult) -> i64 {
+    r.config
+        .get("max_resolution")
+        .and_then(serde_json::Value::as_i64)
+        .unwrap_or(0)
+}
+
+fn px(res: i64) -> String {
+    if res == 0 {
+        "the stored resolution".into()
+    } else {
+        format!("{res} px")
+    }
+}
+
+/// 18 distinct colours (Category10, then Dark2) before any repeats.
 fn color(i: usize) -> [u8; 3] {
-    let c = colorous::CATEGORY10[i % colorous::CATEGORY10.len()];
+    let (a, b) = (&colorous::CATEGORY10, &colorous::DARK2);
+    let c = match i % (a.len() + b.len()) {
+        k if k < a.len() => a[k],
+        k => b[k - a.len()],
+    };
     [c.r, c.g, c.b]
 }
 
