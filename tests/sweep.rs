@@ -6,6 +6,8 @@
 //! tools/slurm_local.sh, including a failing cell that must cancel the gather job.
 //!
 //! Runs use LP_NUM_THREADS=1 so that a resumed run equals an uninterrupted one bit for bit.
+//! (Over ~600 lines: one file because every test shares the tiny plan, its scenes and the
+//! check of a finished sweep's tables.)
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

@@ -1,7 +1,10 @@
 //! Training: the [`Trainer`] loop around a step that reads as a list of pass calls
 //! ([`step::record_step`]): a pure per-iteration [`plan::StepPlan`], passes that own their
 //! pipelines and scratch ([`passes`]), the model state in [`crate::model::state`], density
-//! control at its cadence, checkpoints. Scoring a frame lives in [`score`] with its own scratch; the commands that reopen a run (`crate::eval`) sit above this module.
+//! control at its cadence, checkpoints. Scoring a frame lives in [`score`] with its own
+//! scratch; the commands that reopen a run (`crate::eval`) sit above this module.
+//! (Over ~600 lines: the Trainer's methods are one state machine around the step; the run
+//! loop itself is [`session`].)
 
 pub mod checkpoint;
 pub mod cli;
