@@ -322,8 +322,17 @@ pub fn write_report(
             md += "\n![Pareto plot](pareto.png)\n";
         }
     }
-    md += "\n## Renders\n\nOne test frame per cell: render, ground truth, error, flows, mask.\n";
-    for r in results.iter().filter(|r| r.strip.is_some()) {
+    // Only strips present beside this copy of the results (a results.jsonl copied elsewhere
+    // has none).
+    let strips: Vec<&CellResult> = results
+        .iter()
+        .filter(|r| r.strip.as_ref().is_some_and(|s| root.join(s).is_file()))
+        .collect();
+    if !strips.is_empty() {
+        md +=
+            "\n## Renders\n\nOne test frame per cell: render, ground truth, error, flows, mask.\n";
+    }
+    for r in strips {
         md += &format!(
             "\n**{}** ({:.2} dB)\n\n![{}]({})\n",
             r.cell,
