@@ -201,6 +201,7 @@ impl Plan {
         self.lpips_weights
             .as_deref()
             .map(|p| Self::resolve(base, p))
+            .map(|p| std::path::absolute(&p).unwrap_or(p))
     }
 
     /// Expands the grid in plan order (scene, then variant, then seed) and checks every cell.
@@ -243,7 +244,12 @@ impl Plan {
         check_flags("flags", &self.flags)?;
         let mut cells = Vec::new();
         for s in &self.scenes {
-            let data = s.data.as_deref().map(|d| Self::resolve(base, d));
+            // Absolute, so a Slurm task started in another directory finds the same data.
+            let data = s
+                .data
+                .as_deref()
+                .map(|d| Self::resolve(base, d))
+                .map(|d| std::path::absolute(&d).unwrap_or(d));
             if let Some(d) = &data {
                 if !d.is_dir() {
                     return Err(format!(
