@@ -289,8 +289,8 @@ impl BlendBwdVariant {
 
     /// The default for a device: per-tile accumulation on CPU devices (lavapipe: 10–14× the
     /// subgroup kernel on the issue-14 scenes, `bench --suite raster`); the subgroup kernel on
-    /// GPUs, where an 8-invocation workgroup per tile would leave most of a warp idle (not
-    /// measured there yet).
+    /// GPUs, where an 8-invocation workgroup per tile leaves most of a warp idle (the whole
+    /// CPU-shaped step measured 6.8–7.9× slower on an H200, docs/gpu_h200.md).
     /// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum` overrides the choice (benches, tests).
     pub fn for_device(info: &crate::vk::DeviceInfo) -> Self {
         match std::env::var("DISPFLOW_BLEND_BWD").as_deref() {
@@ -332,7 +332,7 @@ impl BlendFwdVariant {
 
     /// The default for a device: pixels in registers on CPU devices (lavapipe, `bench --suite
     /// raster`); the shared-memory kernel on GPUs, where an 8-invocation workgroup per tile
-    /// would leave most of a warp idle (not measured there yet).
+    /// leaves most of a warp idle (measured on an H200 with the backward: docs/gpu_h200.md).
     /// `DISPFLOW_BLEND_FWD=shared|tile-regs` overrides the choice (benches, tests).
     pub fn for_device(info: &crate::vk::DeviceInfo) -> Self {
         match std::env::var("DISPFLOW_BLEND_FWD").as_deref() {

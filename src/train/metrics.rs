@@ -66,6 +66,10 @@ pub struct Report {
     /// the windowed training PSNR before and after, and any rollback.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub collapses: Vec<crate::train::collapse::CollapseEvent>,
+    /// Densification steps that removed most of the Gaussians (`train` only; from
+    /// `log.jsonl`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub mass_prunes: Vec<crate::train::collapse::PruneEvent>,
     pub per_frame: Vec<FrameEval>,
 }
 
@@ -120,6 +124,7 @@ impl Report {
             train_seconds: None,
             time_to_psnr: Vec::new(),
             collapses: Vec::new(),
+            mass_prunes: Vec::new(),
             per_frame: per,
         }
     }

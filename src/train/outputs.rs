@@ -64,6 +64,9 @@ pub struct LogLine {
     /// A collapse confirmed since the previous line (and the rollback it caused).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub collapse: Option<super::collapse::CollapseEvent>,
+    /// A densification step since the previous line that removed most of the Gaussians.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prune: Option<super::collapse::PruneEvent>,
 }
 
 fn one() -> f64 {

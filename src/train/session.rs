@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::checkpoint::{kept_checkpoint, last_checkpoint, write_atomic, write_ply, Checkpoint};
+use super::collapse::PruneEvent;
 use super::config::TrainConfig;
 use super::outputs::frame_png;
 use super::outputs::{last_wall_s, remove_stale_outputs, truncate_log};
@@ -199,6 +200,7 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
     let mut guard = super::guard::CollapseGuard::new(&tr)?;
     let mut collapse = None;
     let mut dead_warned = false;
+    let mut prune = None;
     let mut log_file = std::fs::OpenOptions::new()
         .append(true)
         .open(&log_path)
@@ -210,9 +212,32 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
             && (next % cfg.test_interval == 0 || next == cfg.iterations);
         let log = next % cfg.log_interval == 0 || next == cfg.iterations || test;
         let t0 = Instant::now();
+        let n_before = tr.n();
         let info = tr.step(log, log && spec.verbose)?;
         step_ms.push(t0.elapsed().as_secs_f64() * 1e3);
         let done = tr.last_plan.expect("a step ran");
+        if let Some(cut) = done.densify {
+            let n = tr.n();
+            if n == 0 {
+                // Nothing is left to draw, to densify from, or to place nodes on.
+                let ev = PruneEvent {
+                    iteration: done.iteration,
+                    before: n_before,
+                    after: 0,
+                    screen_cut: cut,
+                };
+                let text = ev.describe(cfg.densify.max_screen_size);
+                return Err(Error::Invalid(text.replacen(
+                    "warning: ",
+                    "nothing left to train: ",
+                    1,
+                )));
+            }
+            if let Some(ev) = PruneEvent::of(done.iteration, n_before, n, cut) {
+                progress.note(&ev.describe(cfg.densify.max_screen_size));
+                prune = Some(ev);
+            }
+        }
         if let Some((v, id)) = tr.last_loss() {
             worst.see(v.psnr, id);
             if let Some(ev) = guard.after_step(&mut tr, &done, v.loss, v.psnr)? {
@@ -352,6 +377,7 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
                 worst_psnr: worst.as_ref().map(|w| w.0),
                 worst_view: worst.map(|w| w.1),
                 collapse: collapse.take(),
+                prune: prune.take(),
             };
             let text = serde_json::to_string(&line).expect("log line serialises");
             std::io::Write::write_all(&mut log_file, format!("{text}\n").as_bytes())
@@ -437,6 +463,7 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
     let log = super::outputs::read_log(&log_path)?;
     metrics.time_to_psnr = super::curve::time_to_psnr(&log);
     metrics.collapses = log.iter().filter_map(|l| l.collapse.clone()).collect();
+    metrics.mass_prunes = log.iter().filter_map(|l| l.prune.clone()).collect();
     crate::report::save_png(
         &super::outputs::training_plot(&log)?,
         &out.join("training.png"),
