@@ -122,6 +122,21 @@ fn config_rejects_unknown_fields_and_bad_values() {
     }
     std::fs::write(&p, "iterations = 'many'\n").unwrap();
     assert!(TrainConfig::from_toml_over(&TrainConfig::fast(), &p).is_err());
+    // Every shipped recipe (tools/recipe/*.toml, which the README and recipe_rows.sh name)
+    // reads as a valid configuration over the fast preset, and changes something.
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/recipe");
+    let mut recipes = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let f = e.unwrap().path();
+        if f.extension().is_some_and(|x| x == "toml") {
+            let c = TrainConfig::from_toml_over(&TrainConfig::fast(), &f)
+                .and_then(|c| c.validate().map(|_| c))
+                .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            assert_ne!(c, TrainConfig::fast(), "{} changes nothing", f.display());
+            recipes += 1;
+        }
+    }
+    assert!(recipes >= 2, "tools/recipe holds the shipped recipes");
     // The written config.toml reads back to the same configuration.
     let c = TrainConfig::paper();
     std::fs::write(&p, c.to_toml()).unwrap();
