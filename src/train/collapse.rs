@@ -112,7 +112,8 @@ impl PruneEvent {
         })
     }
 
-    /// The warning line, naming the setting that removed them when it can only be one.
+    /// What happened, naming the setting that removed them (callers prefix "warning: " or
+    /// make it an error).
     pub fn describe(&self, max_screen_size: f32) -> String {
         let pct = 100.0 * (self.before - self.after) as f64 / self.before as f64;
         let cause = if self.screen_cut {
@@ -125,7 +126,7 @@ impl PruneEvent {
             "they fell under densify.min_opacity".to_string()
         };
         format!(
-            "warning: iteration {}: densification kept {} of {} Gaussians ({pct:.1} % removed): \
+            "iteration {}: densification kept {} of {} Gaussians ({pct:.1} % removed): \
              {cause}. Densification grows only where Gaussians remain",
             self.iteration, self.after, self.before
         )

@@ -226,15 +226,16 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
                     after: 0,
                     screen_cut: cut,
                 };
-                let text = ev.describe(cfg.densify.max_screen_size);
-                return Err(Error::Invalid(text.replacen(
-                    "warning: ",
-                    "nothing left to train: ",
-                    1,
+                return Err(Error::Invalid(format!(
+                    "nothing left to train: {}",
+                    ev.describe(cfg.densify.max_screen_size)
                 )));
             }
             if let Some(ev) = PruneEvent::of(done.iteration, n_before, n, cut) {
-                progress.note(&ev.describe(cfg.densify.max_screen_size));
+                progress.note(&format!(
+                    "warning: {}",
+                    ev.describe(cfg.densify.max_screen_size)
+                ));
                 prune = Some(ev);
             }
         }
