@@ -118,6 +118,32 @@ fn train_writes_the_collapse_to_its_log_and_metrics() {
     }
 }
 
+#[test]
+fn a_rolled_back_run_logs_to_its_end() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg = absurd(OnCollapse::Rollback);
+    let (ok, stderr, out) = train_cli(tmp.path(), "rollback", &cfg);
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("rolled back to iteration"), "{stderr}");
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(out.join("log.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let rolled = lines
+        .iter()
+        .position(|l| l["collapse"]["rolled_back_to"].is_u64())
+        .expect("log.jsonl names the rollback");
+    // The lines after the rollback are there (the cut once replaced the file under the open
+    // handle, and every later line went to the deleted one), in order, to the last iteration.
+    let its: Vec<u64> = lines[rolled..]
+        .iter()
+        .map(|l| l["iteration"].as_u64().unwrap())
+        .collect();
+    assert!(its.windows(2).all(|w| w[0] < w[1]), "{its:?}");
+    assert_eq!(its.last(), Some(&(cfg.iterations as u64)), "{its:?}");
+}
+
 /// Trains the tiny scene with `cfg` through the CLI (single-threaded lavapipe); returns the
 /// exit status, stderr and the run directory.
 fn train_cli(tmp: &std::path::Path, name: &str, cfg: &TrainConfig) -> (bool, String, PathBuf) {

@@ -245,7 +245,12 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
                 let what = match ev.rolled_back_to {
                     Some(r) => {
                         // The abandoned iterations' lines go; the next line carries the event.
+                        // The cut replaces the file: append to the new one, not the old inode.
                         truncate_log(&log_path, r)?;
+                        log_file = std::fs::OpenOptions::new()
+                            .append(true)
+                            .open(&log_path)
+                            .map_err(io(&log_path))?;
                         format!(
                             "; rolled back to iteration {r}, deformation rate ×{}",
                             tr.deform_lr_scale
