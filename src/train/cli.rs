@@ -90,8 +90,9 @@ pub struct TrainArgs {
     /// intermediate (v2, t1), the ablation [default: direct].
     #[arg(long, value_enum)]
     pub motion_order: Option<super::config::MotionOrder>,
-    /// Gradient through the normalisation statistics: detached (min/max held constant) or full
-    /// (autograd through them) [default: detached].
+    /// Gradient through the normalisation statistics: full (autograd through min/max; the loss
+    /// stays scale-free) or detached (held constant: an ablation whose extra shrinking
+    /// direction kills the deformation in long runs) [default: full].
     #[arg(long, value_enum)]
     pub motion_norm_grad: Option<super::config::NormGrad>,
     /// Scene-motion source: tvl1 (the GPU optical flow, the method) or oracle (the synthetic

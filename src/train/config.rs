@@ -171,8 +171,10 @@ pub struct TrainConfig {
     /// (intermediate (v2, t1), the ablation).
     #[serde(default)]
     pub motion_order: MotionOrder,
-    /// Gradient through the normalisation statistics: detached (constants; the default) or
-    /// full (autograd through min/max, which lets one pixel take the whole image's gradient).
+    /// Gradient through the normalisation statistics: full (autograd through min/max, the
+    /// default) or detached (constants). The loss is scale-free only with the full gradient;
+    /// detached, every step also shrinks all displacements, and the deformation dies within
+    /// ~450 iterations of the motion term's start (docs/motion_recipe.md).
     #[serde(default)]
     pub motion_norm_grad: NormGrad,
     /// Source of the scene motion: the TV-L1 estimator (the method) or, for synthetic scenes,
@@ -399,10 +401,11 @@ pub enum MotionFlow {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum NormGrad {
-    /// Statistics (min, max, …) are constants of the backward pass.
-    #[default]
+    /// Statistics (min, max, …) are constants of the backward pass (an ablation: it adds a
+    /// shrinking direction that a scale-free loss does not have).
     Detached,
     /// Autograd semantics: gradients also flow through the statistics.
+    #[default]
     Full,
 }
 
@@ -471,7 +474,7 @@ impl TrainConfig {
             pair_gap: 1,
             flow_preset: "default".into(),
             motion_order: MotionOrder::Direct,
-            motion_norm_grad: NormGrad::Detached,
+            motion_norm_grad: NormGrad::Full,
             motion_flow: MotionFlow::Tvl1,
             deform: DeformMode::On,
             init_filter: false,

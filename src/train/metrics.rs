@@ -183,8 +183,8 @@ pub fn method_name(cfg: &TrainConfig) -> String {
     if moving && cfg.motion_weight != 0.1 {
         name += &format!(", α={}", cfg.motion_weight);
     }
-    if moving && cfg.motion_norm_grad == NormGrad::Full {
-        name += ", full norm grad";
+    if moving && cfg.motion_norm_grad == NormGrad::Detached {
+        name += ", detached norm stats";
     }
     name
 }
