@@ -1,5 +1,9 @@
 #!/bin/bash
-# Device call 3: the norm-grad default and the method effect at 3000 iterations, seeds 0/1.
+# Device calls 3-5 (2026-11-26): the norm-grad default, the method effect at 3000 iterations, 10000-iteration recipe runs.
+# Call 3 read h200_call3_jobs.txt (its bi-base-s1, bi-det-s0 and bi-oracle-full failed on the built-in cache race and
+# were rerun by hand, alone); calls 4 and 5 ran the same script on a binary with the new default, reading
+# h200_call4_jobs.txt and h200_call5_jobs.txt (mujoco-scene5 added: S5) with the job and xargs limits at 320/330 s and
+# 230/235 s, then `bench step` (call 4). The jobs file was .bin/jobs3.txt in the carried working tree.
 for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig
 export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
 B=$PWD/.bin/dispflow-vk; L=$OUT/log.txt; mkdir -p runs
