@@ -7,7 +7,7 @@
 mod train_common;
 
 use dispflow_vk::testing;
-use dispflow_vk::train::collapse::{CollapseEvent, OnCollapse};
+use dispflow_vk::train::collapse::{CollapseEvent, OnCollapse, SAME_PLACE_ROLLBACKS};
 use dispflow_vk::train::config::TrainConfig;
 use dispflow_vk::train::guard::CollapseGuard;
 use dispflow_vk::train::Trainer;
@@ -93,6 +93,45 @@ fn a_collapse_is_reported_and_rollback_recovers_from_it() {
         "back above the collapse level {:.2} dB: {after:.2} over the next 10 steps",
         r.after_db
     );
+}
+
+/// A fall the deformation rate does not cause: the spherical harmonics' higher band starts at
+/// iteration 150 with an absurd rate (the base colour's ×10 000), whatever the deformation does.
+fn sh_blowup() -> TrainConfig {
+    let mut c = tiny_config(300);
+    c.warm_up = 100;
+    c.densify.until = 0;
+    c.sh_degree = 1;
+    c.sh_interval = 150;
+    c.lr.feature_rest_div = 1e-4;
+    c.collapse.drop_db = 1.0;
+    c.collapse.on_collapse = OnCollapse::Rollback;
+    c
+}
+
+#[test]
+fn rollback_stops_when_halving_the_rate_leaves_the_fall_as_it_was() {
+    let cfg = sh_blowup();
+    let (events, _) = run(&cfg);
+    eprintln!("{events:#?}");
+    // Two rollbacks meet the same fall; the third time the run goes on (it used to roll back
+    // 8 times and stop with an error).
+    let stop = events
+        .iter()
+        .position(|e| e.rollback_stopped)
+        .expect("the rollbacks stop");
+    assert_eq!(stop, SAME_PLACE_ROLLBACKS as usize, "{events:#?}");
+    for e in &events[..stop] {
+        assert!(e.rolled_back_to.is_some_and(|r| r < 150), "{e:?}");
+    }
+    let s = &events[stop];
+    assert!(s.rolled_back_to.is_none(), "{s:?}");
+    assert_eq!(s.deform_lr_scale, Some(0.25));
+    assert!(events[..=stop]
+        .windows(2)
+        .all(|w| w[0].iteration.abs_diff(w[1].iteration) < 60));
+    // No rollback after it: the run is in warn mode to its end.
+    assert!(events[stop..].iter().all(|e| e.rolled_back_to.is_none()));
 }
 
 #[test]

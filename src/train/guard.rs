@@ -8,7 +8,10 @@
 use std::collections::VecDeque;
 
 use super::checkpoint::Checkpoint;
-use super::collapse::{CollapseEvent, CollapseWatch, OnCollapse, CONFIRM_WINDOWS, MAX_ROLLBACKS};
+use super::collapse::{
+    CollapseEvent, CollapseWatch, OnCollapse, CONFIRM_WINDOWS, MAX_ROLLBACKS, SAME_DEPTH,
+    SAME_PLACE_ROLLBACKS,
+};
 use super::plan::StepPlan;
 use super::Trainer;
 use crate::error::{Error, Result};
@@ -23,6 +26,10 @@ pub struct CollapseGuard {
     action: OnCollapse,
     kept: VecDeque<Checkpoint>,
     rollbacks: u32,
+    /// Where the last rollback's fall was confirmed and how deep it was (dB), and how many
+    /// rollbacks in a row met an unchanged fall there.
+    last_fall: Option<(u32, f64)>,
+    same_place: u32,
 }
 
 impl CollapseGuard {
@@ -40,6 +47,8 @@ impl CollapseGuard {
             action: cfg.on_collapse,
             kept,
             rollbacks: 0,
+            last_fall: None,
+            same_place: 0,
         })
     }
 
@@ -63,6 +72,24 @@ impl CollapseGuard {
             return Ok(None);
         };
         if self.action == OnCollapse::Warn {
+            return Ok(Some(ev));
+        }
+        let reach = (CONFIRM_WINDOWS as u32 + 1) * self.window;
+        let depth = ev.before_db - ev.after_db;
+        self.same_place = match self.last_fall {
+            Some((p, d)) if p.abs_diff(ev.iteration) <= reach && depth >= SAME_DEPTH * d => {
+                self.same_place + 1
+            }
+            _ => 0,
+        };
+        self.last_fall = Some((ev.iteration, depth));
+        if self.same_place >= SAME_PLACE_ROLLBACKS && ev.kind == "psnr_drop" {
+            // Halving the rate did not move the fall: it is not the rate's doing, and more
+            // rollbacks would only replay it. Go on from here, reporting what comes (a
+            // non-finite loss cannot go on: it keeps rolling back up to MAX_ROLLBACKS).
+            self.action = OnCollapse::Warn;
+            ev.rollback_stopped = true;
+            ev.deform_lr_scale = Some(tr.deform_lr_scale);
             return Ok(Some(ev));
         }
         if self.rollbacks >= MAX_ROLLBACKS {

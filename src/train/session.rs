@@ -256,6 +256,13 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
                             tr.deform_lr_scale
                         )
                     }
+                    None if ev.rollback_stopped => format!(
+                        "; it came back as deep at the place of the last {} rollbacks, which \
+                         halved the deformation rate (now ×{}): the rate is not its cause, so \
+                         the run goes on without rolling back",
+                        super::collapse::SAME_PLACE_ROLLBACKS,
+                        tr.deform_lr_scale
+                    ),
                     None => " (--on-collapse rollback would restore an earlier state)".into(),
                 };
                 progress.note(&format!(
