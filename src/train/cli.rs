@@ -176,7 +176,8 @@ pub struct TrainArgs {
     /// `collapse.drop_db` (2 dB) below its best for three windows): warn (say so in the progress
     /// line, log.jsonl and metrics.json; a non-finite loss stops the run) or rollback
     /// (restore the last good in-memory checkpoint and go on with the deformation rate
-    /// halved, at most 8 times) [default: warn].
+    /// halved, at most 8 times; after two rollbacks that meet the same fall as deep, the rate
+    /// is not its cause and the run goes on without rolling back) [default: warn].
     #[arg(long, value_enum)]
     pub on_collapse: Option<super::collapse::OnCollapse>,
     /// Keep every checkpoint as OUT/checkpoints/NNNNNN.ckpt (for `dispflow-vk signal`).

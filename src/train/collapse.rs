@@ -18,8 +18,8 @@ pub enum OnCollapse {
     #[default]
     Warn,
     /// Restore the last checkpoint taken before the fall and go on with the deformation's
-    /// learning rate halved (logged); at most [`MAX_ROLLBACKS`] times, and no more once the
-    /// halvings leave a fall as it was ([`SAME_PLACE_ROLLBACKS`]).
+    /// learning rate halved (logged); at most 8 times (`MAX_ROLLBACKS`), and no more once two
+    /// rollbacks meet the same fall as deep (`SAME_PLACE_ROLLBACKS`).
     Rollback,
 }
 
