@@ -201,10 +201,13 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
     let mut collapse = None;
     let mut dead_warned = false;
     let mut prune = None;
-    let mut log_file = std::fs::OpenOptions::new()
-        .append(true)
-        .open(&log_path)
-        .map_err(io(&log_path))?;
+    let open_log = || {
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(&log_path)
+            .map_err(io(&log_path))
+    };
+    let mut log_file = open_log()?;
     while tr.iteration < cfg.iterations {
         let next = tr.iteration + 1;
         let test = cfg.test_interval > 0
@@ -247,10 +250,7 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
                         // The abandoned iterations' lines go; the next line carries the event.
                         // The cut replaces the file: append to the new one, not the old inode.
                         truncate_log(&log_path, r)?;
-                        log_file = std::fs::OpenOptions::new()
-                            .append(true)
-                            .open(&log_path)
-                            .map_err(io(&log_path))?;
+                        log_file = open_log()?;
                         format!(
                             "; rolled back to iteration {r}, deformation rate ×{}",
                             tr.deform_lr_scale
