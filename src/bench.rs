@@ -377,19 +377,7 @@ fn splat_inputs(inputs: &[Buffer; 6], n: u32) -> SplatInputs<'_> {
     }
 }
 
-/// Median of a sample (NaN-free).
-pub fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
-    } else {
-        0.5 * (v[m - 1] + v[m])
-    }
-}
+pub use crate::stats::median;
 
 /// Kernel families `dispflow-vk bench` can time.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

@@ -31,6 +31,11 @@ pub enum Command {
     /// run: flow_mmap of every estimator variant against the motion masks, next to the
     /// ground-truth flow's (RUN/signal.json and signal.md).
     Signal(dispflow_vk::eval::signal::SignalArgs),
+    /// Score another implementation's test renders (a folder of PNGs, one per test frame, in
+    /// the split's order) with this project's evaluation: PSNR, SSIM, dynamic/static PSNR by
+    /// the motion masks, LPIPS with weights. Writes a sweep cell (cells/<scene>/<variant>/
+    /// seed<N>/) so `sweep report` tables it beside this project's runs (docs/reference.md).
+    ScoreRenders(dispflow_vk::eval::reference::ScoreArgs),
     /// List the Vulkan devices and the limits that matter to the kernels.
     Devices,
     /// Time the GPU kernels (sort, scan, rasteriser forward/backward) with GPU timestamps and

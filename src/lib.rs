@@ -17,6 +17,7 @@
 //!   which never imports from it.
 //! - [`sweep`]: plans of scenes × variants × seeds run as `train` + `eval` processes
 //!   (locally or as a Slurm job array) and the tables built from their results.
+//! - [`stats`]: small shared statistics (a median), below every user.
 //! - [`report`]: CPU-drawn pictures (heat maps, labelled strips, line plots) and Markdown
 //!   tables for `eval` and `render`.
 
@@ -29,6 +30,7 @@ pub mod model;
 pub mod reference;
 pub mod report;
 pub mod shaders;
+pub mod stats;
 pub mod sweep;
 pub mod testing;
 pub mod train;

@@ -21,6 +21,9 @@ fn main() -> anyhow::Result<()> {
         cli::Command::Render(args) => {
             dispflow_vk::eval::render::run_render(&args)?;
         }
+        cli::Command::ScoreRenders(args) => {
+            dispflow_vk::eval::reference::run_score(&args)?;
+        }
         cli::Command::Devices => {
             for (i, (name, kind)) in dispflow_vk::vk::list_devices()?.iter().enumerate() {
                 println!("{i}: {name} ({kind})");

@@ -205,7 +205,7 @@ fn train_flags_and_datasets() {
     let data_cases: [(&Path, &[&str]); 3] = [
         (
             Path::new("/no/such/dataset"),
-            &["/no/such/dataset", "not a directory"],
+            &["/no/such/dataset", "no such directory"],
         ),
         (&file, &["dataset.json", "not a directory"]),
         (

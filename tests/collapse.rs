@@ -2,7 +2,10 @@
 //! the fast preset's, so the deformation throws the Gaussians away as it starts) is reported
 //! with its iteration and levels, by the trainer's guard and by `dispflow-vk train` in
 //! `log.jsonl` and `metrics.json`; with rollback it returns to an earlier state with the
-//! deformation rate halved and ends above the level it had collapsed to.
+//! deformation rate halved and ends above the level it had collapsed to. A run that dies in
+//! its first steps (before any sliding window could have filled) and a run that ends below
+//! its initial test PSNR are caught too (issue 36): a warning, `status` in `metrics.json`, a
+//! flag in the sweep's tables. A widening time curriculum is not a collapse.
 
 mod train_common;
 
@@ -40,7 +43,8 @@ fn run(cfg: &TrainConfig) -> (Vec<CollapseEvent>, f64) {
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
     let mut tr = Trainer::new(&gpu, cfg, &ds).unwrap();
-    let mut guard = CollapseGuard::new(&tr).unwrap();
+    let (mut guard, first) = CollapseGuard::new(&mut tr).unwrap();
+    assert!(first.is_none(), "the initial renders are finite");
     let (mut events, mut after) = (Vec::new(), Vec::new());
     while tr.iteration < cfg.iterations {
         tr.step(false, false).unwrap();
@@ -49,7 +53,7 @@ fn run(cfg: &TrainConfig) -> (Vec<CollapseEvent>, f64) {
         if !events.is_empty() && after.len() < 10 {
             after.push(v.psnr);
         }
-        if let Some(e) = guard.after_step(&mut tr, &done, v.loss, v.psnr).unwrap() {
+        if let Some(e) = guard.after_step(&mut tr, &done, v.loss).unwrap() {
             let stop = e.kind == "non_finite_loss" && e.rolled_back_to.is_none();
             events.push(e);
             if stop {
@@ -181,6 +185,87 @@ fn a_rolled_back_run_logs_to_its_end() {
         .collect();
     assert!(its.windows(2).all(|w| w[0] < w[1]), "{its:?}");
     assert_eq!(its.last(), Some(&(cfg.iterations as u64)), "{its:?}");
+}
+
+/// A run that dies at once: a colour rate of 1000 throws every base colour far out of [0, 1]
+/// at the first Adam step, and the training PSNR sits at 7.6 dB from iteration 1 on (the
+/// start: 11.3), long before a sliding window of training steps could have measured a level
+/// to fall from. Measured on the code before issue 36: no collapse reported, exit 0.
+fn early_death() -> TrainConfig {
+    let mut c = tiny_config(200);
+    c.warm_up = 200;
+    c.densify.until = 0;
+    c.lr.feature = 1000.0;
+    c
+}
+
+#[test]
+fn an_early_death_and_an_end_below_the_start_are_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (ok, stderr, out) = train_cli(tmp.path(), "dead", &early_death());
+    assert!(ok, "{stderr}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    let (initial, last) = (
+        m["initial_psnr"].as_f64().unwrap(),
+        m["psnr"].as_f64().unwrap(),
+    );
+    eprintln!("initial {initial:.2} dB, final {last:.2} dB\n{stderr}");
+    // The probe views were measured before the first step: the death is a fall from there.
+    let c = m["collapses"]
+        .as_array()
+        .expect("metrics.json lists the collapse");
+    assert!(
+        c[0]["iteration"].as_u64().unwrap() <= 100,
+        "caught early: {c:?}"
+    );
+    assert!(c[0]["before_db"].as_f64().unwrap() > c[0]["after_db"].as_f64().unwrap() + 2.0);
+    assert!(
+        stderr.contains("warning: collapse at iteration"),
+        "{stderr}"
+    );
+    // It ends below where it started, and says so.
+    assert!(last < initial, "{last} vs {initial}");
+    assert_eq!(m["status"], "collapsed", "{}", m["status_note"]);
+    assert!(
+        m["status_note"]
+            .as_str()
+            .unwrap()
+            .contains("ended below its initial test PSNR"),
+        "{}",
+        m["status_note"]
+    );
+    assert!(stderr.contains("warning: the run ended below its initial test PSNR"));
+    // The sweep's cell result carries the status; its tables flag it.
+    let r = dispflow_vk::sweep::exec::cell_status(&out).unwrap();
+    assert_eq!(r.as_deref(), Some("collapsed"));
+}
+
+#[test]
+fn a_healthy_run_is_ok_and_a_widening_curriculum_is_no_collapse() {
+    // The seq9full recipe's curriculum (the first 2 % of the frames, widening to all by 80 %
+    // of the run) with its deformation rate, on the tiny scene: the training views change
+    // under it, the probe views do not.
+    let tmp = tempfile::tempdir().unwrap();
+    let mut cfg = TrainConfig::from_toml_over(
+        &tiny_config(400),
+        std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tools/recipe/seq9full.toml"
+        )),
+    )
+    .unwrap();
+    cfg.warm_up = 0;
+    let (ok, stderr, out) = train_cli(tmp.path(), "curriculum", &cfg);
+    assert!(ok, "{stderr}");
+    assert!(!stderr.contains("collapse at iteration"), "{stderr}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(m["status"], "ok", "{m}");
+    assert!(m.get("collapses").is_none());
+    // Its log carries the probe views' level.
+    let log = std::fs::read_to_string(out.join("log.jsonl")).unwrap();
+    assert!(log.contains("\"probe_psnr\""), "{log}");
 }
 
 /// Trains the tiny scene with `cfg` through the CLI (single-threaded lavapipe); returns the

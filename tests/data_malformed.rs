@@ -644,7 +644,8 @@ fn missing_directory_and_unknown_format() {
     let e = data::load(&tmp.path().join("nope"), &data_util::opts())
         .unwrap_err()
         .to_string();
-    assert!(e.contains("nope") && e.contains("not a directory"), "{e}");
+    assert!(e.contains("nope") && e.contains("no such directory"), "{e}");
+    assert!(!e.contains("unknown dataset format"), "{e}");
     std::fs::write(tmp.path().join("readme.txt"), "hi").unwrap();
     let e = data::load(tmp.path(), &data_util::opts())
         .unwrap_err()

@@ -323,11 +323,14 @@ fn settings(capacity: u32) -> DensifySettings {
 fn densify_step_matches_twin_every_case() {
     let gpu = testing::gpu();
     // 5000 originals: both scans span several 2048-element blocks.
-    for (sh_degree, screen, n) in [
-        (1u32, true, 600),
-        (0, false, 600),
-        (3, true, 600),
-        (0, true, 5000),
+    // `world`: the world-size prune alone (the paper preset: no screen-size test, as the
+    // official code's never fires); it has its own switch.
+    for (sh_degree, screen, world, n) in [
+        (1u32, true, true, 600),
+        (0, false, false, 600),
+        (2, false, true, 600),
+        (3, true, true, 600),
+        (0, true, true, 5000),
     ] {
         let p = random_gaussians(5 + sh_degree as u64, n, sh_degree);
         let m = random_moments(6, n, sh_degree);
@@ -338,9 +341,12 @@ fn densify_step_matches_twin_every_case() {
         if !screen {
             s.max_screen_size = 0.0;
         }
+        if !world {
+            s.max_world_size = 0.0;
+        }
         let want = twin::densify(&p, &m, &v, &stats, &s);
         let r = want.report;
-        let ctx = format!("n {n}, sh {sh_degree}, screen prune {screen}");
+        let ctx = format!("n {n}, sh {sh_degree}, screen prune {screen}, world prune {world}");
         assert_eq!(r.downgraded, 0, "{ctx}: the budget should not bind here");
         assert!(r.kept > 0 && r.cloned > 0 && r.split > 0, "{ctx}: {r:?}");
         assert!(r.pruned_opacity > 0, "{ctx}: no opacity prune: {r:?}");
@@ -360,6 +366,8 @@ fn densify_step_matches_twin_every_case() {
                     .any(|d| d.action == Action::Clone && d.keep == [false, true]),
                 "{ctx}: no clone with only the copy kept"
             );
+        } else if world {
+            assert!(r.pruned_world > 0 && r.pruned_screen == 0, "{ctx}: {r:?}");
         } else {
             assert_eq!(r.pruned_screen + r.pruned_world, 0, "{ctx}: {r:?}");
         }
@@ -457,6 +465,7 @@ fn budget_downgrades_the_last_demands_in_index_order() {
     let mut s = settings(n as u32 + demanded - short);
     s.min_opacity = 0.0; // no pruning: the count is exactly the budget
     s.max_screen_size = 0.0;
+    s.max_world_size = 0.0;
     let want = twin::densify(&p, &m, &v, &stats, &s);
     assert_eq!(want.report.downgraded, short);
     assert_eq!(want.params.len() as u32, s.capacity);
@@ -588,7 +597,14 @@ fn densify_rejects_bad_settings_without_panicking() {
         ),
         (
             DensifySettings {
-                max_world_size: 0.0,
+                max_world_size: -1.0,
+                ..good
+            },
+            10,
+        ),
+        (
+            DensifySettings {
+                max_world_size: f32::NAN,
                 ..good
             },
             10,
@@ -642,9 +658,14 @@ fn stats_match_twin_over_views() {
         want.max_radii[i] = (r.next_u32() % 9) as f32;
     }
     upload_stats(&gpu, &b, &want);
-    let opts = RenderOpts::default();
     let (mut visible, mut culled) = (0, 0);
     for (k, cam) in cameras(48, 40).iter().enumerate() {
+        // Odd views use the official statistic (Σ|∂L/∂mean2d|, the backward's slots 10-11).
+        let abs = k % 2 == 1;
+        let opts = RenderOpts {
+            abs_grad: abs,
+            ..RenderOpts::default()
+        };
         let (rb, _) = render(&gpu, &rast, cam, &up, &opts);
         let px = (cam.width * cam.height) as usize;
         backward(
@@ -659,10 +680,17 @@ fn stats_match_twin_over_views() {
         // A discarded (overflowed) step first: a set flag in the guard adds nothing.
         let overflowed = gpu.buffer_from("overflow pairs", &[0u32, 9, 1, 9]).unwrap();
         let mut rec = Recorder::new(&gpu).unwrap();
-        dens.record_stats(&mut rec, &b, &rb, n as u32, Some(overflowed.slice(0, 16)));
+        dens.record_stats(
+            &mut rec,
+            &b,
+            &rb,
+            n as u32,
+            Some(overflowed.slice(0, 16)),
+            abs,
+        );
         rec.finish().unwrap();
         let mut rec = Recorder::new(&gpu).unwrap();
-        dens.record_stats(&mut rec, &b, &rb, n as u32, None);
+        dens.record_stats(&mut rec, &b, &rb, n as u32, None, abs);
         rec.finish().unwrap();
         let grad2d: Vec<f32> = gpu.read(rb.grad2d.elems::<f32>(0, 12 * n as u64)).unwrap();
         let splats: Vec<[f32; 4]> = gpu
@@ -675,7 +703,16 @@ fn stats_match_twin_over_views() {
                 culled += 1;
             }
         }
-        twin::accumulate_stats(&mut want, &grad2d, &splats, cam.width, cam.height, n);
+        if abs {
+            // The statistic bounds the plain one: Σ|g| ≥ |Σg| per component.
+            for i in 0..n {
+                for c in 0..2 {
+                    let (a, g) = (grad2d[12 * i + 10 + c], grad2d[12 * i + c]);
+                    assert!(a >= g.abs() * (1.0 - 1e-3), "view {k} row {i}: {a} < |{g}|");
+                }
+            }
+        }
+        twin::accumulate_stats(&mut want, &grad2d, &splats, (cam.width, cam.height), n, abs);
     }
     assert!(
         visible > n && culled > 0,
@@ -753,9 +790,9 @@ fn stats_with_non_finite_gradients_stay_finite() {
     upload_stats(&gpu, &b, &want);
     for _ in 0..2 {
         let mut rec = Recorder::new(&gpu).unwrap();
-        dens.record_stats(&mut rec, &b, &rb, n as u32, None);
+        dens.record_stats(&mut rec, &b, &rb, n as u32, None, false);
         rec.finish().unwrap();
-        twin::accumulate_stats(&mut want, &grad2d, &splats, w, h, n);
+        twin::accumulate_stats(&mut want, &grad2d, &splats, (w, h), n, false);
     }
     let got = read_stats(&gpu, &b, 16);
     for (what, v) in [

@@ -164,6 +164,7 @@ fn static_scene_under_known_camera_motion_has_no_indirect_scene_motion() {
     let opts = RenderOpts {
         background: [0.0; 3],
         alpha_max: 0.99,
+        abs_grad: false,
     };
     let (ra, oa) = raster_common::render(&gpu, &rast, &a, &up, &opts);
     let (rb, _) = raster_common::render(&gpu, &rast, &b, &up, &opts);

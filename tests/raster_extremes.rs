@@ -28,6 +28,7 @@ fn run_finite(scene: &Scene, w: u32, h: u32) -> (Rendered, Grads) {
     let opts = RenderOpts {
         background: [0.2, 0.3, 0.4],
         alpha_max: 0.99,
+        abs_grad: false,
     };
     let px = (w * h) as usize;
     let u = upstream(9, px, scene.feature_dims as usize);
@@ -250,6 +251,7 @@ fn hundred_thousand_gaussians_in_one_tile() {
 const OPTS: RenderOpts = RenderOpts {
     background: [0.2, 0.3, 0.4],
     alpha_max: 0.99,
+    abs_grad: false,
 };
 
 /// Tolerances of one GPU-vs-twin comparison (see the section comment).

@@ -49,6 +49,7 @@ fn small_scene_matches_golden_png() {
     let opts = RenderOpts {
         background: [0.05, 0.05, 0.08],
         alpha_max: 0.99,
+        abs_grad: false,
     };
     // Every blend-forward variant against the one golden image.
     for (fv, _, out) in render_each(&gpu, &mut rast, &cam, &up, &opts) {

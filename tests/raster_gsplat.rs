@@ -110,6 +110,7 @@ fn run(name: &str) {
     let opts = RenderOpts {
         background: [0.0; 3],
         alpha_max: 0.999,
+        abs_grad: false,
     };
     // Start with a capacity too small on purpose: render_checked must grow and re-run.
     let size = RasterSize {

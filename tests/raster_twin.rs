@@ -44,9 +44,12 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
     let mut rast = Rasterizer::new(&gpu).unwrap();
     let scene = random_scene(seed, n, sh_degree, k);
     let cam = camera(w, h);
+    // Even seeds also accumulate the absolute statistic (slots 10-11); odd ones must leave
+    // them at zero.
     let opts = RenderOpts {
         background: [0.1, 0.2, 0.3],
         alpha_max: 0.99,
+        abs_grad: seed % 2 == 0,
     };
     let up = Uploaded::new(&gpu, &scene);
     // Every forward variant, and every backward variant after each (the backward reads the
@@ -171,13 +174,20 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
         let pg = twin::project_bwd(&tcam, &g, &proj, &bg);
         for (v, grads) in backward_each(&gpu, &mut rast, &b, &cam, &up, &opts, &u) {
             let ctx = format!("{ctx}, blend_bwd {}", v.name());
-            check_grads(&ctx, n, &grads, &bg, &pg);
+            check_grads(&ctx, n, &grads, &bg, &pg, opts.abs_grad);
         }
     }
 }
 
 /// Every gradient of one backward run against the twin's.
-fn check_grads(ctx: &str, n: usize, grads: &Grads, bg: &twin::BlendGrads, pg: &twin::ProjectGrads) {
+fn check_grads(
+    ctx: &str,
+    n: usize,
+    grads: &Grads,
+    bg: &twin::BlendGrads,
+    pg: &twin::ProjectGrads,
+    abs_grad: bool,
+) {
     let s = G2D_STRIDE as usize;
     let col = |lo: usize, hi: usize| -> Vec<f32> {
         (0..n)
@@ -201,6 +211,26 @@ fn check_grads(ctx: &str, n: usize, grads: &Grads, bg: &twin::BlendGrads, pg: &t
         bg.color.as_flattened(),
     );
     close_kind(&format!("{ctx}: d depth"), &col(9, 10), &bg.depth);
+    if abs_grad {
+        let abs = col(10, 12);
+        close_kind(
+            &format!("{ctx}: Σ|d mean2d|"),
+            &abs,
+            bg.mean2d_abs.as_flattened(),
+        );
+        // |Σ| ≤ Σ|·| per component: the statistic bounds the plain gradient.
+        for (a, m) in abs.iter().zip(col(0, 2)) {
+            assert!(
+                *a >= m.abs() * (1.0 - 1e-3) - 1e-7,
+                "{ctx}: Σ|g| {a} < |Σg| {m}"
+            );
+        }
+    } else {
+        assert!(
+            col(10, 12).iter().all(|&v| v == 0.0),
+            "{ctx}: slots 10-11 written"
+        );
+    }
     close_kind(
         &format!("{ctx}: d features"),
         &grads.d_features,

@@ -741,6 +741,7 @@ mod gpu_step {
                 deform: Some((0.0, 1)),
             },
             densify_stats: false,
+            abs_grad: false,
             densify: None,
             opacity_reset: false,
             sparse: split,

@@ -244,6 +244,33 @@ fn a_tiny_plan_runs_end_to_end_is_skipped_when_done_and_its_tables_rebuild() {
     );
     assert_eq!(read_results(&only.join("results.jsonl")).unwrap(), rs);
 
+    // Every cell carries its run's status; a cell that did not end ok is flagged in the
+    // tables (its variant marked ⚠, a note naming the cell and why).
+    assert!(
+        rs.iter().all(|r| r.status.as_deref() == Some("ok")),
+        "{rs:?}"
+    );
+    assert!(!std::fs::read_to_string(dir.join("tables/image.md"))
+        .unwrap()
+        .contains('⚠'));
+    let mut bad = rs.clone();
+    bad[0].status = Some("collapsed".into());
+    bad[0].status_note = Some("ended below its initial test PSNR (7.03 < 13.15 dB)".into());
+    let flagged = s.root.join("flagged");
+    std::fs::create_dir_all(&flagged).unwrap();
+    dispflow_vk::sweep::results::write_results(&flagged, &bad).unwrap();
+    let (ok, out) = s.sweep(&["report", "flagged"]);
+    assert!(ok, "{out}");
+    for t in ["image", "motion", "trade"] {
+        let md = std::fs::read_to_string(flagged.join(format!("tables/{t}.md"))).unwrap();
+        assert!(md.contains("baseline ⚠"), "{t}: {md}");
+        assert!(
+            md.contains("moving/baseline/seed0 collapsed (ended below its initial test PSNR"),
+            "{t}: {md}"
+        );
+        assert!(!md.contains("DispFlow-GS ⚠"), "{t}: {md}");
+    }
+
     // A changed plan does not silently reuse a cell finished with other settings.
     let changed = s.plan("tiny", &two_scenes().replace("nodes = 32", "nodes = 16"));
     let (ok, out) = s.sweep(&[changed.to_str().unwrap(), "--out", "out"]);

@@ -9,8 +9,8 @@
 //
 // Prune test of an output row (3DGS densify_and_prune, applied to the rows after densifying):
 //   logit < logit(min_opacity)
-//   or, when screen_prune: max_radii > max_screen_size (new rows: 0), or
-//                          max log-scale > ln(max_world_size) (children: log-scale − ln 1.6).
+//   or, when screen_prune bit 0: max_radii > max_screen_size (new rows: 0),
+//   or, when screen_prune bit 1: max log-scale > ln(max_world_size) (children: log-scale − ln 1.6).
 // Writes action[i] = code | keep0 << 2 | keep1 << 3 and rows[i] = keep0 + keep1.
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
@@ -29,9 +29,8 @@ layout(std430, binding = 5) writeonly buffer Rows { uint rows[]; };             
 
 bool pruned(float logit, float radius, float ls) {
     bool p = logit < pc.min_opacity_logit;
-    if (pc.screen_prune != 0u) {
-        p = p || radius > pc.max_screen_size || ls > pc.log_max_world_size;
-    }
+    if ((pc.screen_prune & 1u) != 0u) p = p || radius > pc.max_screen_size;
+    if ((pc.screen_prune & 2u) != 0u) p = p || ls > pc.log_max_world_size;
     return p;
 }
 

@@ -1,6 +1,7 @@
 #version 460
 // Densification statistics, after every backward pass (3DGS add_densification_stats): for each
-// visible Gaussian (screen radius > 0) add ‖∂L/∂mean_ndc‖ to grad_accum, 1 to denom, and keep
+// visible Gaussian (screen radius > 0) add ‖∂L/∂mean_ndc‖ (abs_grad: ‖Σ|∂L/∂mean_ndc|‖, the
+// official Deformable-3DGS statistic, from slots 10-11) to grad_accum, 1 to denom, and keep
 // the largest screen radius. ∂L/∂ndc = ∂L/∂pixel · (W/2, H/2). A non-finite gradient counts as
 // a zero-length one (the view still counts in denom); grad_accum saturates at FLT_MAX.
 #extension GL_GOOGLE_include_directive : require
@@ -26,8 +27,9 @@ void main() {
     if (i >= pc.num_gaussians || skipped) return;
     float radius = splats[3u * i + 1u].w;
     if (!(radius > 0.0)) return;
-    float gx = grad2d[12u * i] * (0.5 * float(pc.width));
-    float gy = grad2d[12u * i + 1u] * (0.5 * float(pc.height));
+    uint at = 12u * i + (pc.abs_grad != 0u ? 10u : 0u); // Σ|g| (slots 10-11) or Σg (0-1)
+    float gx = grad2d[at] * (0.5 * float(pc.width));
+    float gy = grad2d[at + 1u] * (0.5 * float(pc.height));
     float norm = 0.0;
     if (is_finite(gx) && is_finite(gy)) {
         // hypot without overflow of the squares.

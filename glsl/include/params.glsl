@@ -211,7 +211,7 @@ struct BlendParams {
     uint tiles_y;
     float alpha_max;  // 0.99 as in 3DGS (gsplat: 0.999)
     uint num_gaussians;
-    uint pad0;
+    uint abs_grad;    // blend_bwd: also accumulate Σ|∂L/∂mean2d| per pixel into slots 10-11
     uint pad1;
 };
 
@@ -241,6 +241,10 @@ struct DensifyStatsParams {
     uint width;         // image size: ∂L/∂ndc = ∂L/∂pixel · (W/2, H/2)
     uint height;
     uint skip_flags;    // (flag, needed) pairs in `skip`; any non-zero flag: add nothing
+    uint abs_grad;      // the statistic: 0 = ‖Σ ∂L/∂ndc‖, 1 = ‖Σ |∂L/∂ndc|‖ (slots 10-11)
+    uint pad0;
+    uint pad1;
+    uint pad2;
 };
 
 // src/kernels/densify.rs — densify step (grow, mark, count, write). Thresholds arrive

@@ -136,6 +136,10 @@ void main() {
             add(base + 7, g_col.g);
             add(base + 8, g_col.b);
             add(base + 9, g_z);
+            if (pc.abs_grad != 0u) { // uniform: the densification's absolute statistic
+                add(base + 10, abs(g_mean.x));
+                add(base + 11, abs(g_mean.y));
+            }
 #if FEAT > 0
             for (int c = 0; c < FEAT; ++c) {
                 float s = subgroupAdd(gfe[c]);

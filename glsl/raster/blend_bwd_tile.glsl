@@ -84,7 +84,7 @@ void main() {
         float gfe[FEAT];
         for (int c = 0; c < FEAT; ++c) gfe[c] = 0.0;
 #endif
-        vec2 g_mean = vec2(0.0);
+        vec2 g_mean = vec2(0.0), g_abs = vec2(0.0);
         vec3 g_con = vec3(0.0), g_col = vec3(0.0);
         float g_op = 0.0, g_z = 0.0;
         bool any_live = false;
@@ -116,7 +116,9 @@ void main() {
                 if (g < pc.alpha_max) { // unclamped: α = opacity · exp(−σ)
                     g_op += g_alpha * exp(-sigma);
                     float g_sigma = -g_alpha * alpha;
-                    g_mean += g_sigma * vec2(con.x * d.x + con.y * d.y, con.z * d.y + con.y * d.x);
+                    vec2 gm = g_sigma * vec2(con.x * d.x + con.y * d.y, con.z * d.y + con.y * d.x);
+                    g_mean += gm;
+                    g_abs += abs(gm);
                     g_con += g_sigma * vec3(0.5 * d.x * d.x, d.x * d.y, 0.5 * d.y * d.y);
                 }
             }
@@ -133,6 +135,10 @@ void main() {
         add(base + 7, g_col.g);
         add(base + 8, g_col.b);
         add(base + 9, g_z);
+        if (pc.abs_grad != 0u) { // uniform: the densification's absolute statistic
+            add(base + 10, g_abs.x);
+            add(base + 11, g_abs.y);
+        }
 #if FEAT > 0
         for (int c = 0; c < FEAT; ++c) {
             float s = subgroupAdd(gfe[c]);

@@ -11,9 +11,11 @@
 //!   splits to `[0,1]`.
 //! - Validation frames: `transforms_test.json` when present (what D-NeRF papers report), else
 //!   `transforms_val.json`.
-//! - Initial points: `points.npy`, then `points3d.ply` / `fused.ply`, then random in the bounds
-//!   (the bbox of the file points, else a cube around the origin of half-size half the mean camera
-//!   distance). No normalisation is applied (blender scenes are already centred).
+//! - Initial points (`auto`): `points.npy`, then `points3d.ply` / `fused.ply`, then random in the
+//!   bounds (the bbox of the file points, else a cube around the origin of half-size half the
+//!   mean camera distance). `official` (the paper preset): `points3d.ply`, else 100 000 random
+//!   points in ±1.3, as the official Deformable-3DGS reader. No normalisation is applied
+//!   (blender scenes are already centred).
 
 use std::path::{Path, PathBuf};
 
@@ -321,11 +323,13 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> DataResult<Dataset> {
         max: Vec3::splat(half),
     };
     let npy = dir.join("points.npy");
-    let ply = ["points3d.ply", "points3D.ply", "fused.ply"]
-        .iter()
-        .map(|n| dir.join(n))
-        .find(|p| p.is_file());
     let pref = opts.points;
+    let names: &[&str] = if pref == PointsPreference::Official {
+        &["points3d.ply"]
+    } else {
+        &["points3d.ply", "points3D.ply", "fused.ply"]
+    };
+    let ply = names.iter().map(|n| dir.join(n)).find(|p| p.is_file());
     let mut chosen: Option<InitPoints> = None;
     if (pref == PointsPreference::Auto && npy.is_file()) || pref == PointsPreference::Npy {
         let pts = points::read_points_npy(&npy)?;
@@ -341,18 +345,32 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> DataResult<Dataset> {
             "no COLMAP model in a D-NeRF/blender scene; choose npy, ply, random or auto",
         ));
     }
-    if chosen.is_none() && matches!(pref, PointsPreference::Auto | PointsPreference::Ply) {
+    let from_ply = matches!(
+        pref,
+        PointsPreference::Auto | PointsPreference::Ply | PointsPreference::Official
+    );
+    if chosen.is_none() && from_ply {
         chosen = points::ply_points(dir, ply.as_deref(), pref, |pts| {
             pts.iter().map(|p| p.as_vec3()).collect()
         })?;
     }
+    let (cube, n_random) = if pref == PointsPreference::Official {
+        let h = points::OFFICIAL_RANDOM_HALF;
+        let b = Bounds {
+            min: Vec3::splat(-h),
+            max: Vec3::splat(h),
+        };
+        (b, points::OFFICIAL_RANDOM_POINTS)
+    } else {
+        (cube, opts.random_points)
+    };
     let bounds = chosen
         .as_ref()
         .and_then(|c| Bounds::of(&c.positions))
         .unwrap_or(cube);
     let points = match chosen {
         Some(p) => p,
-        None => points::random_points(&bounds, opts.random_points, opts.seed),
+        None => points::random_points(&bounds, n_random, opts.seed),
     };
     if let Some(name) = ply.as_ref().and_then(|p| p.file_name()) {
         if name == "fused.ply" {

@@ -119,10 +119,17 @@ impl std::fmt::Display for Format {
 
 /// Detects the format of a dataset directory.
 pub fn detect_format(dir: &Path) -> DataResult<Format> {
-    if !dir.is_dir() {
-        return Err(DataError::UnknownFormat {
+    if !dir.exists() {
+        return Err(DataError::File {
             path: dir.display().to_string(),
-            msg: "not a directory".into(),
+            msg: "no such directory; expected a dataset directory (nerfies or D-NeRF format)"
+                .into(),
+        });
+    }
+    if !dir.is_dir() {
+        return Err(DataError::File {
+            path: dir.display().to_string(),
+            msg: "not a directory; expected a dataset directory (nerfies or D-NeRF format)".into(),
         });
     }
     if dir.join("dataset.json").is_file() {

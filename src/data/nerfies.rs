@@ -713,7 +713,9 @@ fn initial_points(
         .find(|p| p.is_file());
     let pref = opts.points;
     let mut chosen: Option<InitPoints> = None;
-    if (pref == PointsPreference::Auto && npy.is_file()) || pref == PointsPreference::Npy {
+    if (matches!(pref, PointsPreference::Auto | PointsPreference::Official) && npy.is_file())
+        || pref == PointsPreference::Npy
+    {
         let pts = points::read_points_npy(&npy)?;
         chosen = Some(InitPoints {
             positions: normalise_all(scene, &pts),
@@ -721,7 +723,12 @@ fn initial_points(
             source: PointSource::Npy(npy.clone()),
         });
     }
-    if chosen.is_none() && matches!(pref, PointsPreference::Auto | PointsPreference::Colmap) {
+    if chosen.is_none()
+        && matches!(
+            pref,
+            PointsPreference::Auto | PointsPreference::Official | PointsPreference::Colmap
+        )
+    {
         match colmap_dir(dir) {
             Some(sparse) => match colmap_points(&sparse, scene, cams, ids)? {
                 Ok(p) => chosen = Some(p),
@@ -739,7 +746,12 @@ fn initial_points(
             None => {}
         }
     }
-    if chosen.is_none() && matches!(pref, PointsPreference::Auto | PointsPreference::Ply) {
+    if chosen.is_none()
+        && matches!(
+            pref,
+            PointsPreference::Auto | PointsPreference::Official | PointsPreference::Ply
+        )
+    {
         chosen = points::ply_points(dir, ply.as_deref(), pref, |pts| normalise_all(scene, pts))?;
     }
     let bounds = scene_bounds

@@ -12,7 +12,18 @@ use rand::{Rng, SeedableRng};
 use super::{Bounds, DataError, DataResult};
 
 /// Which source of initial points to use.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum PointsPreference {
     /// The first available of: points.npy, COLMAP points3D.bin, PLY, random.
     #[default]
@@ -25,7 +36,15 @@ pub enum PointsPreference {
     Ply,
     /// Uniformly random points in the scene bounds.
     Random,
+    /// The official Deformable-3DGS rule: D-NeRF scenes read `points3d.ply` alone, else
+    /// 100 000 points uniform in the cube ±1.3 (other files such as `fused.ply` are ignored);
+    /// nerfies captures `points.npy` (as `auto`, which tries it first).
+    Official,
 }
+
+/// Points and half-size of the official Deformable-3DGS's random D-NeRF initialisation.
+pub const OFFICIAL_RANDOM_POINTS: usize = 100_000;
+pub const OFFICIAL_RANDOM_HALF: f32 = 1.3;
 
 /// Where the initial points came from.
 #[derive(Clone, Debug, PartialEq)]

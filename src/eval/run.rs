@@ -137,7 +137,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     })?;
     // The MLP's size follows from config.toml and the dataset's kind (its time encoding).
     let synthetic = data::detect_format(&data_dir)? == data::Format::Blender;
-    let floats = MlpLayout::new(&mlp_config_of(synthetic, &cfg))?.total;
+    let floats = MlpLayout::new(&mlp_config_of(synthetic, cfg.mlp_shape()))?.total;
     if bytes.len() != floats * 4 {
         return Err(invalid(
             &weights,

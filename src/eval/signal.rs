@@ -415,6 +415,7 @@ impl Probe {
             RenderOpts {
                 background: [0.0; 3],
                 alpha_max: ALPHA_MAX,
+                abs_grad: false,
             },
         );
         let g = &model.gaussians;

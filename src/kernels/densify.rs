@@ -1,8 +1,10 @@
 //! 3DGS adaptive density control on the GPU (`glsl/densify/*.comp`). CPU twin:
 //! `reference::densify`.
 //!
-//! - `record_stats` after every backward pass: per visible Gaussian, ‖∂L/∂mean_ndc‖ into
-//!   `grad_accum`, +1 into `denom`, the largest screen radius into `max_radii`.
+//! - `record_stats` after every backward pass: per visible Gaussian, ‖∂L/∂mean_ndc‖ (or, with
+//!   `abs_grad`, the norm of Σ|∂L/∂mean_ndc| per component, the official Deformable-3DGS
+//!   rasteriser's statistic) into `grad_accum`, +1 into `denom`, the largest screen radius into
+//!   `max_radii`.
 //! - `record_densify` (3DGS: every 100 iterations from 500 to 15000): `densify_grow` (demanded
 //!   clone/split per original) → scan of growth (budget) → `densify_mark` (budget, prune bits,
 //!   rows per original) → scan of rows (output offsets) → `densify_count` (new count, GPU u32)
@@ -18,7 +20,8 @@
 //! Screen-size prune: an original row is tested with its accumulated `max_radii`, new rows
 //! (copies, children) with 0. (The official 3DGS code zeroes `max_radii2D` for every point in
 //! `densification_postfix` before its prune, which makes that test a no-op there; here it acts
-//! as the paper describes.)
+//! as the paper describes when `max_screen_size > 0`. The paper preset has 0: the official
+//! behaviour, docs/parity.md.) The world-size prune has its own switch (`max_world_size`).
 //!
 //! Budget rule (exact, deterministic): originals are processed in index order with a running
 //! row total starting at N; an original whose growth (+1 for clone or split) would push the
@@ -42,6 +45,11 @@ pub struct DensifyStatsParams {
     pub width: u32,
     pub height: u32,
     pub skip_flags: u32,
+    /// 1: the statistic reads `grad2d`'s slots 10-11 (Σ|∂L/∂mean2d|), else 0-1.
+    pub abs_grad: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// Mirrors `DensifyParams` in glsl/include/params.glsl (checked by tests/layout.rs). Built by
@@ -99,11 +107,11 @@ pub struct DensifySettings {
     pub scene_extent: f32,
     /// Prune rows with sigmoid(opacity) below (3DGS: 0.005).
     pub min_opacity: f32,
-    /// Prune rows whose largest screen radius (pixels) exceeds this; 0 disables this and the
-    /// world-size prune (3DGS: 20 once the first opacity reset has happened, else 0).
+    /// Prune rows whose largest screen radius (pixels) exceeds this; 0 disables it (3DGS asks
+    /// for 20 once the first opacity reset has happened; the official code's test never fires).
     pub max_screen_size: f32,
-    /// Prune rows whose largest scale exceeds this, only when `max_screen_size > 0`
-    /// (3DGS: 0.1 · extent).
+    /// Prune rows whose largest scale exceeds this (world units); 0 disables it, independently
+    /// of `max_screen_size` (3DGS: 0.1 · extent once the first opacity reset has happened).
     pub max_world_size: f32,
     /// Seed of the split sampler (with `iteration`: see `glsl/densify/densify.glsl`).
     pub seed: u32,
@@ -154,13 +162,11 @@ impl DensifySettings {
                 "a finite value >= 0 (0 disables)",
             );
         }
-        if self.max_screen_size > 0.0
-            && (self.max_world_size.is_nan() || self.max_world_size <= 0.0)
-        {
+        if self.max_world_size.is_nan() || self.max_world_size < 0.0 {
             return bad(
                 "max_world_size",
                 self.max_world_size,
-                "a value > 0 when max_screen_size > 0",
+                "a value >= 0 (0 disables)",
             );
         }
         if n > self.capacity {
@@ -183,11 +189,13 @@ impl DensifySettings {
             capacity: self.capacity,
             seed: self.seed,
             iteration: self.iteration,
-            screen_prune: (self.max_screen_size > 0.0) as u32,
+            screen_prune: (self.max_screen_size > 0.0) as u32
+                | ((self.max_world_size > 0.0) as u32) << 1,
             grad_threshold: self.grad_threshold,
             log_dense_scale: (self.percent_dense as f64 * self.scene_extent as f64).ln() as f32,
             min_opacity_logit: (p / (1.0 - p)).ln() as f32,
             max_screen_size: self.max_screen_size,
+            // ln(0) = −∞ is never compared (bit 1 off); +∞ never prunes.
             log_max_world_size: (self.max_world_size as f64).ln() as f32,
             ..Default::default()
         }
@@ -324,6 +332,7 @@ impl Densifier {
         raster: &RasterBuffers,
         n: u32,
         skip: Option<BufSlice<'_>>,
+        abs_grad: bool,
     ) {
         let skip = skip.unwrap_or(b.no_skip.slice(0, 8));
         assert!(
@@ -341,6 +350,8 @@ impl Densifier {
             width: raster.width,
             height: raster.height,
             skip_flags: (skip.size / 8) as u32,
+            abs_grad: abs_grad as u32,
+            ..Default::default()
         };
         rec.dispatch_rows(
             &self.stats,

@@ -71,7 +71,11 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             num_gaussians,
             width,
             height,
-            skip_flags
+            skip_flags,
+            abs_grad,
+            pad0,
+            pad1,
+            pad2
         ),
         layout!(
             densify::DensifyParams,
@@ -152,7 +156,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             tiles_y,
             alpha_max,
             num_gaussians,
-            pad0,
+            abs_grad,
             pad1
         ),
         layout!(

@@ -122,7 +122,7 @@ pub struct BlendParams {
     pub tiles_y: u32,
     pub alpha_max: f32,
     pub num_gaussians: u32,
-    pub pad0: u32,
+    pub abs_grad: u32,
     pub pad1: u32,
 }
 
@@ -132,6 +132,9 @@ pub struct RenderOpts {
     pub background: [f32; 3],
     /// α clamp: 0.99 as in 3DGS; gsplat uses 0.999.
     pub alpha_max: f32,
+    /// The backward also accumulates Σ_pixels |∂L/∂mean2d| per component into `grad2d`'s
+    /// slots 10-11 (the official Deformable-3DGS rasteriser's densification statistic).
+    pub abs_grad: bool,
 }
 
 impl Default for RenderOpts {
@@ -139,6 +142,7 @@ impl Default for RenderOpts {
         RenderOpts {
             background: [0.0; 3],
             alpha_max: 0.99,
+            abs_grad: false,
         }
     }
 }
@@ -577,7 +581,7 @@ impl Rasterizer {
             tiles_y,
             alpha_max: o.alpha_max,
             num_gaussians: g.n,
-            pad0: 0,
+            abs_grad: o.abs_grad as u32,
             pad1: 0,
         }
     }

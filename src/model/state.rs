@@ -202,23 +202,32 @@ impl DeformState {
     }
 }
 
-/// The MLP configuration of a run: Deformable-3DGS's encodings for the dataset's kind
-/// (synthetic scenes: γ(t) with L=6 through a time net; real captures: γ(t) with L=10) at the
-/// configured depth and width, the skip at the middle layer.
-/// The run's MLP: [`mlp_config_for`] with the positional encodings' frequency counts
-/// overridden where the run's configuration sets them (0 = the paper's for the dataset).
-pub fn mlp_config_of(synthetic: bool, cfg: &crate::train::config::TrainConfig) -> MlpConfig {
-    let mut m = mlp_config_for(synthetic, cfg.mlp_depth, cfg.mlp_width);
-    if cfg.mlp_x_freqs > 0 {
-        m.x_freqs = cfg.mlp_x_freqs;
+/// A run's MLP as its configuration states it: depth, width and the positional encodings'
+/// frequency counts (0 = the paper's for the dataset's kind). The trainer's configuration
+/// builds it (`TrainConfig::mlp_shape`), so the model never reads the trainer's settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MlpShape {
+    pub depth: u32,
+    pub width: u32,
+    pub x_freqs: u32,
+    pub t_freqs: u32,
+}
+
+/// The run's MLP: [`mlp_config_for`] (Deformable-3DGS's encodings for the dataset's kind:
+/// synthetic scenes γ(t) with L=6 through a time net, real captures γ(t) with L=10) with the
+/// frequency counts overridden where `shape` sets them.
+pub fn mlp_config_of(synthetic: bool, shape: MlpShape) -> MlpConfig {
+    let mut m = mlp_config_for(synthetic, shape.depth, shape.width);
+    if shape.x_freqs > 0 {
+        m.x_freqs = shape.x_freqs;
     }
-    if cfg.mlp_t_freqs > 0 {
+    if shape.t_freqs > 0 {
         m.time = match m.time {
             TimeEncoding::Direct { .. } => TimeEncoding::Direct {
-                freqs: cfg.mlp_t_freqs,
+                freqs: shape.t_freqs,
             },
             TimeEncoding::TimeNet { hidden, out, .. } => TimeEncoding::TimeNet {
-                freqs: cfg.mlp_t_freqs,
+                freqs: shape.t_freqs,
                 hidden,
                 out,
             },

@@ -94,23 +94,25 @@ pub struct DensifyOut {
 
 /// Twin of `densify_stats`: for Gaussians `i < n` with screen radius `splats[3i+1][3] > 0`,
 /// `grad_accum += ‖(gx·W/2, gy·H/2)‖` (0 if not finite in f32; saturating at f32::MAX),
-/// `denom += 1`, `max_radii = max(max_radii, radius)`.
+/// `denom += 1`, `max_radii = max(max_radii, radius)`. `(gx, gy)` are `grad2d`'s slots 0-1, or
+/// 10-11 (Σ|∂L/∂mean2d|) with `abs_grad`.
 pub fn accumulate_stats(
     stats: &mut DensifyStats,
     grad2d: &[f32],
     splats: &[[f32; 4]],
-    width: u32,
-    height: u32,
+    (width, height): (u32, u32),
     n: usize,
+    abs_grad: bool,
 ) {
     let (hw, hh) = (0.5 * width as f32, 0.5 * height as f32);
+    let at = if abs_grad { 10 } else { 0 };
     for i in 0..n {
         let radius = splats[3 * i + 1][3];
         if radius.is_nan() || radius <= 0.0 {
             continue;
         }
-        let gx = grad2d[12 * i] * hw;
-        let gy = grad2d[12 * i + 1] * hh;
+        let gx = grad2d[12 * i + at] * hw;
+        let gy = grad2d[12 * i + at + 1] * hh;
         let mut norm = 0.0f32;
         if gx.is_finite() && gy.is_finite() {
             norm = (gx as f64).hypot(gy as f64) as f32;
@@ -192,11 +194,10 @@ pub fn split_mean(g: &HostGaussians, i: usize, c: u32, seed: u32, iteration: u32
 
 /// Twin of the prune test in `densify_mark`.
 fn prune_reasons(p: &DensifyParams, logit: f32, radius: f32, ls: f32) -> [bool; 3] {
-    let screen = p.screen_prune != 0;
     [
         logit < p.min_opacity_logit,
-        screen && radius > p.max_screen_size,
-        screen && ls > p.log_max_world_size,
+        p.screen_prune & 1 != 0 && radius > p.max_screen_size,
+        p.screen_prune & 2 != 0 && ls > p.log_max_world_size,
     ]
 }
 

@@ -198,8 +198,27 @@ impl CellEnv {
             jobs: self.jobs,
             run: rel(run),
             strip: strip.as_deref().map(rel),
+            status: train
+                .get("status")
+                .and_then(serde_json::Value::as_str)
+                .map(str::to_string),
+            status_note: train
+                .get("status_note")
+                .and_then(serde_json::Value::as_str)
+                .map(str::to_string),
         })
     }
+}
+
+/// The `status` of the finished run in `run` (its `metrics.json`; `None` when it has none).
+pub fn cell_status(run: &Path) -> Result<Option<String>> {
+    let p = run.join("metrics.json");
+    let t = std::fs::read_to_string(&p).map_err(io(&p))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&t).map_err(|e| Error::Invalid(format!("{}: {e}", p.display())))?;
+    Ok(v.get("status")
+        .and_then(serde_json::Value::as_str)
+        .map(str::to_string))
 }
 
 /// Runs `todo` with at most `jobs` at once; `done(cell, result)` is called on the calling

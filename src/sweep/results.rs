@@ -46,6 +46,12 @@ pub struct CellResult {
     /// A test frame's picture strip (render, ground truth, error, flows, mask), relative to
     /// the sweep's root, when `eval` drew one.
     pub strip: Option<String>,
+    /// How the training ended (`train`'s `metrics.json` `status`: ok, collapsed,
+    /// rolled_back) and why when not ok; absent in results written before issue 36.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub status: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub status_note: Option<String>,
 }
 
 pub const RESULTS: &str = "results.jsonl";

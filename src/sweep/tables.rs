@@ -204,6 +204,47 @@ impl<'a> Grid<'a> {
             .map(move |m| Val::Num(self.across_scenes(variant, m.1), m.2))
     }
 
+    /// A variant's row label, marked ⚠ when one of its cells (of `scene`, or of any scene)
+    /// did not end `ok` (a collapse, a rollback, or a final PSNR below the initial one).
+    fn label(&self, variant: &str, scene: Option<&str>) -> String {
+        let flagged = self
+            .results
+            .iter()
+            .filter(|r| r.variant == variant && scene.map_or(true, |s| r.scene == s))
+            .any(|r| r.status.as_deref().is_some_and(|st| st != "ok"));
+        if flagged {
+            format!("{variant} ⚠")
+        } else {
+            variant.to_string()
+        }
+    }
+
+    /// `notes` plus one line naming every cell that did not end `ok`, and why.
+    fn status_notes(&self, mut notes: Vec<String>) -> Vec<String> {
+        let bad: Vec<String> = self
+            .results
+            .iter()
+            .filter(|r| r.status.as_deref().is_some_and(|st| st != "ok"))
+            .map(|r| {
+                format!(
+                    "{} {}{}",
+                    r.cell,
+                    r.status.as_deref().unwrap_or_default(),
+                    r.status_note
+                        .as_deref()
+                        .map_or(String::new(), |n| format!(" ({n})"))
+                )
+            })
+            .collect();
+        if !bad.is_empty() {
+            notes.push(format!(
+                "⚠ cells that did not end ok (their means include them): {}.",
+                bad.join("; ")
+            ));
+        }
+        notes
+    }
+
     /// Rows = variants; per scene one column per metric, then their means over scenes when
     /// there are several scenes.
     fn per_scene(&self, kind: TableKind, metrics: &[(&str, Metric, usize)]) -> SweepTable {
@@ -219,7 +260,7 @@ impl<'a> Grid<'a> {
             .variants
             .iter()
             .map(|v| {
-                let mut row = vec![Val::Text(v.clone())];
+                let mut row = vec![Val::Text(self.label(v, None))];
                 for s in &self.scenes {
                     row.extend(metrics.iter().map(|m| Val::Num(self.stat(s, v, m.1), m.2)));
                 }
@@ -233,7 +274,7 @@ impl<'a> Grid<'a> {
             kind,
             headers,
             rows,
-            notes: vec![seed_note(self.results)],
+            notes: self.status_notes(vec![seed_note(self.results)]),
         }
     }
 
@@ -245,7 +286,7 @@ impl<'a> Grid<'a> {
             .variants
             .iter()
             .map(|v| {
-                let mut row = vec![Val::Text(v.clone())];
+                let mut row = vec![Val::Text(self.label(v, None))];
                 row.extend(self.across_scene_vals(v, &metrics));
                 row
             })
@@ -254,11 +295,11 @@ impl<'a> Grid<'a> {
             kind: TableKind::Ablation,
             headers,
             rows,
-            notes: vec![format!(
+            notes: self.status_notes(vec![format!(
                 "Each value: the mean over the scenes ({}) per seed, then mean ± std over seeds. {}",
                 self.scenes.join(", "),
                 seed_note(self.results)
-            )],
+            )]),
         }
     }
 
@@ -316,7 +357,7 @@ impl<'a> Grid<'a> {
                 if self.cells(s, v).next().is_none() {
                     continue;
                 }
-                let mut row = vec![Val::Text(s.clone()), Val::Text(v.clone())];
+                let mut row = vec![Val::Text(s.clone()), Val::Text(self.label(v, Some(s)))];
                 row.extend(metrics.iter().map(|m| Val::Num(self.stat(s, v, m.1), m.2)));
                 let on = pts.iter().zip(&front).any(|(p, &f)| f && p.0 == *v);
                 let mark = if !self.comparable(s, v) {
@@ -373,7 +414,7 @@ impl<'a> Grid<'a> {
             kind: TableKind::Trade,
             headers,
             rows,
-            notes,
+            notes: self.status_notes(notes),
         }
     }
 

@@ -27,10 +27,12 @@ pub struct TrainArgs {
     /// TOML file overriding fields of the preset (same names as the run's config.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Training iterations [preset: paper 20000, fast 600]. The schedule (warm-up, motion
-    /// start, SH growth, densification window, opacity resets, checkpoint and test intervals)
-    /// scales with it in proportion.
-    #[arg(long)]
+    /// Training iterations, at least 1 [preset: paper 20000, fast 600]. With the fast preset
+    /// the schedule (warm-up, motion start, SH growth, densification window, opacity resets,
+    /// checkpoint and test intervals) scales with it in proportion; the paper preset keeps
+    /// every schedule point where it is, as the official code's --iterations (config field
+    /// `schedule`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub iterations: Option<u32>,
     /// Continue from OUT/checkpoints/last.ckpt when it exists (same configuration).
     #[arg(long)]
@@ -314,8 +316,9 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
     let fmt = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.4}"));
     let fmt2 = |v: Option<f64>| v.map_or("n/a".into(), |x| format!("{x:.2}"));
     println!(
-        "test PSNR {:.2} dB (initial {}; dynamic {}, static {}), SSIM {:.4}, MMAP {}, DRC {}, {} Gaussians, {} ms/step; outputs in {}",
+        "test PSNR {:.2} dB over all {} test frames (initial {}; dynamic {}, static {}), SSIM {:.4}, MMAP {}, DRC {}, {} Gaussians, {} ms/step; outputs in {}",
         metrics.psnr,
+        metrics.per_frame.len(),
         metrics
             .initial_psnr
             .map_or("not measured: resumed".into(), |p| format!("{p:.2}")),
@@ -330,6 +333,9 @@ pub fn run(a: &TrainArgs) -> Result<Report> {
             .map_or("n/a".into(), |v| format!("{v:.1}")),
         spec.out.display()
     );
+    if let (Some(st), Some(why)) = (metrics.status, &metrics.status_note) {
+        println!("status: {} ({why})", st.label());
+    }
     // A validation error anywhere in the run (device creation included) fails the command.
     gpu.check_validation("train")?;
     Ok(metrics)

@@ -12,7 +12,8 @@ use crate::error::{Error, Result};
 /// addressable with the kernels' 32-bit float indices.
 pub const MAX_BUDGET: u32 = 1 << 26;
 
-/// Learning rates (Deformable-3DGS defaults; position rates are scaled by the scene extent).
+/// Learning rates (the official Deformable-3DGS code's, with DispFlow-GS's deformation rate;
+/// docs/parity.md has each rule beside the official line).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LearningRates {
@@ -25,9 +26,21 @@ pub struct LearningRates {
     pub opacity: f64,
     pub scaling: f64,
     pub rotation: f64,
-    /// Deformation MLP: `deform_init → deform_final`, exponential over the run.
+    /// Deformation MLP: `deform_init → deform_final`, exponential over `deform_max_steps`.
     pub deform_init: f64,
     pub deform_final: f64,
+    /// Multiplier of the position and scaling rates. The official code hard-codes 5 for both,
+    /// whatever the scene's size; 0 = this project's earlier rule: the position rate times the
+    /// camera extent (3DGS's `spatial_lr_scale`), the scaling rate as it is.
+    #[serde(default)]
+    pub spatial_scale: f64,
+    /// Steps the position rate decays over (official: 30 000, whatever the run's length);
+    /// 0 = the run's iterations.
+    #[serde(default)]
+    pub position_max_steps: u32,
+    /// Steps the deformation rate decays over (official: 40 000); 0 = the run's iterations.
+    #[serde(default)]
+    pub deform_max_steps: u32,
 }
 
 impl Default for LearningRates {
@@ -41,8 +54,13 @@ impl Default for LearningRates {
             opacity: 0.05,
             scaling: 0.001,
             rotation: 0.001,
-            deform_init: 0.00016 * 5.0,
+            // DispFlow-GS: "the spatial learning-rate scale for the deformation field is set
+            // to 12" (the official Deformable-3DGS: 5); the final rate is not scaled.
+            deform_init: 0.00016 * 12.0,
             deform_final: 0.0000016,
+            spatial_scale: 5.0,
+            position_max_steps: 30_000,
+            deform_max_steps: 40_000,
         }
     }
 }
@@ -53,15 +71,31 @@ impl LearningRates {
     /// scale far in 600 steps: colour ×8, scale ×10, position ×4, and the deformation
     /// decaying 10× over the run instead of 500×. Measured at the fast preset, seed 0
     /// (issue 19's note): built-in 18.05 dB with the paper's rates, 19.80 with colour ×4 and
-    /// scale ×5, 20.07 with these; movingnerf-capture1 18.45 → 20.20 dB (×4/×5).
+    /// scale ×5, 20.07 with these; movingnerf-capture1 18.45 → 20.20 dB (×4/×5). Positions
+    /// scale with the camera extent and every rate decays over the run (the rule these were
+    /// measured with).
     pub fn fast() -> Self {
         LearningRates {
             position_init: 0.00064,
             position_final: 0.0000064,
             feature: 0.02,
             scaling: 0.01,
+            deform_init: 0.00016 * 5.0,
             deform_final: 0.00008,
+            spatial_scale: 0.0,
+            position_max_steps: 0,
+            deform_max_steps: 0,
             ..LearningRates::default()
+        }
+    }
+
+    /// The multipliers of the position and the scaling rates for a scene of camera extent
+    /// `extent` (see [`LearningRates::spatial_scale`]).
+    pub fn spatial(&self, extent: f32) -> (f64, f64) {
+        if self.spatial_scale > 0.0 {
+            (self.spatial_scale, self.spatial_scale)
+        } else {
+            (extent as f64, 1.0)
         }
     }
 }
@@ -70,21 +104,52 @@ fn one_f32() -> f32 {
     1.0
 }
 
-/// Adaptive density control (3DGS).
+/// Adaptive density control (3DGS, as the official Deformable-3DGS code runs it).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DensifyConfig {
     pub from: u32,
+    /// Densification and its statistics stop before this iteration (exclusive, as the
+    /// official `iteration < densify_until_iter`).
     pub until: u32,
     pub interval: u32,
     pub grad_threshold: f32,
+    /// The statistic compared with `grad_threshold`: `abs` (the official rasteriser's: per
+    /// pixel |∂L/∂mean2d| summed per component, then the norm; threshold 0.0007) or `norm`
+    /// (3DGS's norm of the summed gradient; threshold 0.0002).
+    #[serde(default)]
+    pub grad_stat: GradStat,
     pub percent_dense: f32,
     pub min_opacity: f32,
-    /// Screen-size prune (pixels), active after the first opacity reset.
+    /// Screen-size prune (pixels) after the first opacity reset; 0 = off. The official code
+    /// asks for 20 px, but `densification_postfix` zeroes the radii before the test, so it
+    /// never removes anything there: the paper preset has 0 (issue 36: at 20 px our working
+    /// test removed 96 % of the Gaussians at paper resolution).
     pub max_screen_size: f32,
+    /// World-size prune after the first opacity reset: a Gaussian whose largest scale exceeds
+    /// this fraction of the camera extent (official: 0.1); 0 = off. Independent of
+    /// `max_screen_size`.
+    #[serde(default = "tenth")]
+    pub max_world_size: f32,
     pub opacity_reset_interval: u32,
     /// Most Gaussians the run may hold (buffers are allocated for this many).
     pub budget: u32,
+}
+
+fn tenth() -> f32 {
+    0.1
+}
+
+/// The densification's gradient statistic (see [`DensifyConfig::grad_stat`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum GradStat {
+    /// ‖Σ_pixels ∂L/∂mean_ndc‖ (3DGS).
+    Norm,
+    /// ‖Σ_pixels |∂L/∂mean_ndc|‖, componentwise absolute values (the official Deformable-3DGS
+    /// rasteriser fork, as AbsGS).
+    #[default]
+    Abs,
 }
 
 impl Default for DensifyConfig {
@@ -93,10 +158,12 @@ impl Default for DensifyConfig {
             from: 500,
             until: 15_000,
             interval: 100,
-            grad_threshold: 0.0002,
+            grad_threshold: 0.0007,
+            grad_stat: GradStat::Abs,
             percent_dense: 0.01,
             min_opacity: 0.005,
-            max_screen_size: 20.0,
+            max_screen_size: 0.0,
+            max_world_size: 0.1,
             opacity_reset_interval: 3000,
             budget: 500_000,
         }
@@ -190,6 +257,16 @@ pub struct TrainConfig {
     /// camera's near range (see `train::init`); off in the paper preset (faithful), on in fast.
     #[serde(default)]
     pub init_filter: bool,
+    /// Where the initial points come from: `official` (the paper preset: D-NeRF scenes read
+    /// `points3d.ply` alone, else 100 000 random points in ±1.3) or `auto` (every point file
+    /// the loader knows, `fused.ply` included, else random in a cube sized by the cameras).
+    #[serde(default)]
+    pub points: crate::data::points::PointsPreference,
+    /// What `--iterations` does to the schedule: `proportional` (warm-up, motion start,
+    /// densification window, resets, SH growth and intervals scale with it) or `absolute`
+    /// (they stay at their iterations, as the official code's `--iterations`).
+    #[serde(default)]
+    pub schedule: ScheduleMode,
     /// Run the MLP over the dynamic Gaussians only (see [`SparsityConfig`]).
     #[serde(default)]
     pub sparsity: SparsityConfig,
@@ -325,6 +402,15 @@ impl SceneMotionConfig {
     }
 }
 
+/// How `--iterations` changes the schedule (see [`TrainConfig::schedule`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ScheduleMode {
+    #[default]
+    Proportional,
+    Absolute,
+}
+
 /// Whether the scene is modelled with a deformation at all.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -456,7 +542,8 @@ impl TrainConfig {
             mlp_width: 256,
             mlp_depth: 8,
             warm_up: 3000,
-            zero_deform_head: true,
+            // PyTorch's default init of the heads, as the official code (docs/parity.md).
+            zero_deform_head: false,
             mlp_init_gain: 1.0,
             mlp_x_freqs: 0,
             mlp_t_freqs: 0,
@@ -478,6 +565,8 @@ impl TrainConfig {
             motion_flow: MotionFlow::Tvl1,
             deform: DeformMode::On,
             init_filter: false,
+            points: crate::data::points::PointsPreference::Official,
+            schedule: ScheduleMode::Absolute,
             sparsity: SparsityConfig::default(),
             scene_motion: SceneMotionConfig::default(),
             motion_representation: MotionRepresentation::Displacement,
@@ -498,10 +587,15 @@ impl TrainConfig {
             mlp_width: 64,
             mlp_depth: 4,
             warm_up: 200,
+            // 3DGS's statistic and threshold, measured with the rates below; the size prunes
+            // never come (the first opacity reset would be at 1000 of 600).
             densify: DensifyConfig {
                 from: 100,
                 until: 450,
                 interval: 100,
+                grad_threshold: 0.0002,
+                grad_stat: GradStat::Norm,
+                max_screen_size: 20.0,
                 opacity_reset_interval: 1000,
                 budget: 20_000,
                 ..DensifyConfig::default()
@@ -510,6 +604,9 @@ impl TrainConfig {
             checkpoint_interval: 200,
             test_interval: 50,
             init_filter: true,
+            points: crate::data::points::PointsPreference::Auto,
+            schedule: ScheduleMode::Proportional,
+            zero_deform_head: true,
             lr: LearningRates::fast(),
             motion_start: 400,
             // The scene motion that scored and trained best here (issue 16's note): the fast
@@ -541,10 +638,16 @@ impl TrainConfig {
     /// checkpoint and test-PSNR intervals) scales by `n / iterations`, so `--iterations` alone
     /// gives a coherent run. Kept as they are: the densification interval (3DGS accumulates its
     /// gradient statistics over 100 steps whatever the length) and the log interval. The
-    /// learning-rate decays and the sparsity schedule already span the run.
+    /// learning-rate decays and the sparsity schedule already span the run. With
+    /// `schedule = absolute` (the paper preset, as the official `--iterations`) only the
+    /// iteration count changes.
     pub fn with_iterations(&self, n: u32) -> TrainConfig {
         let mut c = self.clone();
         if n == self.iterations {
+            return c;
+        }
+        if self.schedule == ScheduleMode::Absolute {
+            c.iterations = n;
             return c;
         }
         let r = n as f64 / self.iterations.max(1) as f64;
@@ -590,6 +693,16 @@ impl TrainConfig {
         Ok(cfg)
     }
 
+    /// The deformation MLP's shape as configured (the model builds its layout from it).
+    pub fn mlp_shape(&self) -> crate::model::state::MlpShape {
+        crate::model::state::MlpShape {
+            depth: self.mlp_depth,
+            width: self.mlp_width,
+            x_freqs: self.mlp_x_freqs,
+            t_freqs: self.mlp_t_freqs,
+        }
+    }
+
     /// How a run loads its dataset (resolution, background of transparent images, seed).
     pub fn load_options(&self) -> crate::data::LoadOptions {
         let bg = match self.background {
@@ -599,6 +712,7 @@ impl TrainConfig {
         crate::data::LoadOptions {
             max_size: (self.max_resolution > 0).then_some(self.max_resolution),
             background: bg,
+            points: self.points,
             seed: self.seed,
             ..crate::data::LoadOptions::default()
         }
@@ -847,7 +961,11 @@ mod tests {
 
     #[test]
     fn iterations_scale_the_schedule_in_proportion() {
-        for base in [TrainConfig::fast(), TrainConfig::paper()] {
+        let proportional_paper = TrainConfig {
+            schedule: ScheduleMode::Proportional,
+            ..TrainConfig::paper()
+        };
+        for base in [TrainConfig::fast(), proportional_paper.clone()] {
             assert_eq!(base.with_iterations(base.iterations), base);
             for n in [base.iterations * 5, base.iterations / 2, 3000] {
                 let c = base.with_iterations(n);
@@ -870,8 +988,25 @@ mod tests {
         assert_eq!((c.warm_up, c.motion_start), (1000, 2000));
         assert_eq!((c.densify.from, c.densify.until), (500, 2250));
         // Tiny runs keep every divisor at least 1 and the window inside the run.
-        let c = TrainConfig::paper().with_iterations(3);
+        let c = proportional_paper.with_iterations(3);
         c.validate().unwrap();
         assert!(c.densify.until <= 3 && c.sh_interval >= 1 && c.checkpoint_interval >= 1);
+    }
+
+    #[test]
+    fn the_paper_preset_keeps_its_schedule_points_as_the_official_iterations_flag() {
+        let p = TrainConfig::paper();
+        for n in [300, 40_000] {
+            let c = p.with_iterations(n);
+            c.validate().unwrap();
+            assert_eq!(c.iterations, n);
+            assert_eq!(
+                TrainConfig {
+                    iterations: p.iterations,
+                    ..c
+                },
+                p
+            );
+        }
     }
 }

@@ -53,9 +53,10 @@ impl Probe {
 }
 
 impl Probe {
-    /// The progress line's part: ` test P (dyn D / static S) epe E/G px`.
-    pub fn summary(&self) -> String {
-        let mut s = format!(" test {:.2}", self.psnr);
+    /// The progress line's part: ` test(K) P (dyn D / static S) epe E/G px`, K the probe's
+    /// frame count (the final test PSNR is over every test frame, so it differs).
+    pub fn summary(&self, frames: usize) -> String {
+        let mut s = format!(" test({frames}) {:.2}", self.psnr);
         if let (Some(d), Some(st)) = (self.dynamic_psnr, self.static_psnr) {
             s += &format!(" (dyn {d:.2} / static {st:.2})");
         }

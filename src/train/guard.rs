@@ -1,28 +1,46 @@
-//! The collapse guard of a training run: the [`CollapseWatch`] over every step and, with
+//! The collapse guard of a training run: the [`CollapseWatch`] over a fixed set of probe views
+//! (training frames spread over the sequence's time, each rendered before the first step and
+//! then one every `probe_every` steps in turn) and over every step's loss, and, with
 //! `on_collapse = rollback`, the in-memory checkpoints it returns to. A checkpoint is taken
-//! every window of steps while the watch reads the run as healthy; a rollback restores the
-//! newest one taken at least `CONFIRM_WINDOWS + 1` windows before the collapse was confirmed
-//! (the fall began at least that many windows earlier, less the sliding mean's lag of up to
-//! one), so it never returns to a model that had already started to fall.
+//! every round over the views while the watch reads the run as healthy; a rollback restores the
+//! newest one taken at least `CONFIRM_ROUNDS + 1` rounds before the collapse was confirmed (the
+//! fall began at least that early), so it never returns to a model that had already started
+//! to fall.
 
 use std::collections::VecDeque;
 
 use super::checkpoint::Checkpoint;
 use super::collapse::{
-    CollapseEvent, CollapseWatch, OnCollapse, CONFIRM_WINDOWS, MAX_ROLLBACKS, SAME_DEPTH,
-    SAME_PLACE_ROLLBACKS,
+    CollapseEvent, CollapseWatch, OnCollapse, CONFIRM_ROUNDS, MAX_ROLLBACKS, PROBE_VIEWS,
+    SAME_DEPTH, SAME_PLACE_ROLLBACKS,
 };
 use super::plan::StepPlan;
 use super::Trainer;
 use crate::error::{Error, Result};
 
 /// In-memory checkpoints kept (the oldest but the first go when more are taken): enough to
-/// reach back `CONFIRM_WINDOWS + 1` windows.
-const KEPT: usize = 6;
+/// reach back `CONFIRM_ROUNDS + 1` rounds.
+const KEPT: usize = 5;
+
+/// Training frames the guard probes: [`PROBE_VIEWS`] spread evenly over the frames sorted by
+/// time (all of them when there are fewer).
+pub fn probe_views(times: &[f32]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..times.len()).collect();
+    order.sort_by(|&a, &b| times[a].total_cmp(&times[b]).then(a.cmp(&b)));
+    let n = order.len();
+    if n <= PROBE_VIEWS {
+        return order;
+    }
+    (0..PROBE_VIEWS)
+        .map(|i| order[i * (n - 1) / (PROBE_VIEWS - 1)])
+        .collect()
+}
 
 pub struct CollapseGuard {
     watch: CollapseWatch,
-    window: u32,
+    /// Training frames probed, and the steps between two probe renders.
+    views: Vec<usize>,
+    every: u32,
     action: OnCollapse,
     kept: VecDeque<Checkpoint>,
     rollbacks: u32,
@@ -33,48 +51,79 @@ pub struct CollapseGuard {
 }
 
 impl CollapseGuard {
-    /// With `rollback`, keeps the trainer's state now (the launch's first state: the rollback
-    /// of last resort).
-    pub fn new(tr: &Trainer<'_>) -> Result<Self> {
-        let cfg = &tr.cfg.collapse;
+    /// Renders every probe view now (the references a fall is measured from: before the first
+    /// step, the initial model) and, with `rollback`, keeps the trainer's state now (the
+    /// launch's first state: the rollback of last resort). A non-finite initial render is
+    /// returned as an event.
+    pub fn new(tr: &mut Trainer<'_>) -> Result<(Self, Option<CollapseEvent>)> {
+        let cfg = tr.cfg.collapse;
+        let times: Vec<f32> = tr.frames.iter().map(|f| f.time).collect();
+        let views = probe_views(&times);
+        let mut watch = CollapseWatch::new(cfg.drop_db as f64, views.len().max(1));
+        let mut first = None;
+        for (k, &i) in views.iter().enumerate() {
+            let psnr = tr.train_view_psnr(i)?;
+            first = first.or(watch.see(tr.iteration, k, psnr));
+        }
         let mut kept = VecDeque::new();
         if cfg.on_collapse == OnCollapse::Rollback {
             kept.push_back(tr.checkpoint()?);
         }
-        Ok(CollapseGuard {
-            watch: CollapseWatch::new(cfg, tr.cfg.iterations),
-            window: cfg.window_for(tr.cfg.iterations) as u32,
+        let guard = CollapseGuard {
+            watch,
+            views,
+            every: cfg.probe_every_for(tr.cfg.iterations),
             action: cfg.on_collapse,
             kept,
             rollbacks: 0,
             last_fall: None,
             same_place: 0,
-        })
+        };
+        Ok((guard, first))
     }
 
-    /// Reads step `done`'s loss values (`loss`, `psnr`) after it ran. Returns the collapse it
-    /// confirmed, after acting on it: with `rollback`, the trainer is back at an earlier
-    /// iteration with its deformation rate halved; with `warn` nothing else changes (the
-    /// caller stops on a non-finite loss).
+    /// The probe views' mean latest PSNR and their mean fall below their references (dB).
+    pub fn probe_level(&self) -> Option<(f64, f64)> {
+        Some((self.watch.level()?, self.watch.fall()?))
+    }
+
+    /// Steps of one round over the probe views.
+    fn round(&self) -> u32 {
+        self.every * self.views.len().max(1) as u32
+    }
+
+    /// Reads step `done`'s loss after it ran and, when due, renders the next probe view.
+    /// Returns the collapse it confirmed, after acting on it: with `rollback`, the trainer is
+    /// back at an earlier iteration with its deformation rate halved; with `warn` nothing else
+    /// changes (the caller stops on a non-finite loss).
     pub fn after_step(
         &mut self,
         tr: &mut Trainer<'_>,
         done: &StepPlan,
         loss: f64,
-        psnr: f64,
     ) -> Result<Option<CollapseEvent>> {
-        let Some(mut ev) = self.watch.see(tr.iteration, loss, psnr) else {
-            if done.opacity_reset {
-                // The PSNR drops on purpose; the next full window is the new reference.
-                self.watch.restart();
-            }
+        let mut ev = self.watch.see_loss(tr.iteration, loss);
+        if ev.is_none() && done.opacity_reset {
+            // The PSNR drops on purpose; each view's next render is its new reference.
+            self.watch.restart();
+        }
+        if ev.is_none() && !self.views.is_empty() && tr.iteration % self.every == 0 {
+            let k = (tr.iteration / self.every) as usize % self.views.len();
+            let psnr = tr.train_view_psnr(self.views[k])?;
+            ev = self.watch.see(tr.iteration, k, psnr);
+        }
+        let Some(ev) = ev else {
             self.keep(tr)?;
             return Ok(None);
         };
         if self.action == OnCollapse::Warn {
             return Ok(Some(ev));
         }
-        let reach = (CONFIRM_WINDOWS as u32 + 1) * self.window;
+        self.roll_back(tr, ev).map(Some)
+    }
+
+    fn roll_back(&mut self, tr: &mut Trainer<'_>, mut ev: CollapseEvent) -> Result<CollapseEvent> {
+        let reach = (CONFIRM_ROUNDS as u32 + 1) * self.round();
         let depth = ev.before_db - ev.after_db;
         self.same_place = match self.last_fall {
             Some((p, d)) if p.abs_diff(ev.iteration) <= reach && depth >= SAME_DEPTH * d => {
@@ -90,19 +139,17 @@ impl CollapseGuard {
             self.action = OnCollapse::Warn;
             ev.rollback_stopped = true;
             ev.deform_lr_scale = Some(tr.deform_lr_scale);
-            return Ok(Some(ev));
+            return Ok(ev);
         }
         if self.rollbacks >= MAX_ROLLBACKS {
             return Err(Error::Invalid(format!(
-                "iteration {}: the run collapsed again ({}: training PSNR {:.2} → {:.2} dB) after \
+                "iteration {}: the run collapsed again ({}: probe views {:.2} → {:.2} dB) after \
                  {MAX_ROLLBACKS} rollbacks that each halved the deformation rate (now ×{}); \
                  lower lr.deform_init/deform_final or check the data",
                 ev.iteration, ev.kind, ev.before_db, ev.after_db, tr.deform_lr_scale
             )));
         }
-        let limit = ev
-            .iteration
-            .saturating_sub((CONFIRM_WINDOWS as u32 + 1) * self.window);
+        let limit = ev.iteration.saturating_sub(reach);
         let target = self
             .kept
             .iter()
@@ -111,23 +158,29 @@ impl CollapseGuard {
             .or(self.kept.front())
             .expect("the launch's first state is kept")
             .clone();
+        // The references before the fall (reporting it made the fallen levels the new ones);
+        // a non-finite loss leaves them as they are.
+        let references = if ev.kind == "psnr_drop" {
+            self.watch.fallen_from()
+        } else {
+            self.watch.references()
+        };
         let scale = tr.deform_lr_scale * 0.5;
         tr.restore(&target)?;
         tr.deform_lr_scale = scale;
         self.rollbacks += 1;
         // Checkpoints after the one restored belong to the abandoned branch.
         self.kept.retain(|c| c.iteration <= target.iteration);
-        // The restored state is measured against the best level before the fall.
-        self.watch.resume_at(ev.before_db);
+        self.watch.resume_at(references);
         ev.rolled_back_to = Some(target.iteration);
         ev.deform_lr_scale = Some(tr.deform_lr_scale);
-        Ok(Some(ev))
+        Ok(ev)
     }
 
-    /// Takes a rollback checkpoint every window of steps while the run is healthy.
+    /// Takes a rollback checkpoint every round while the run is healthy.
     fn keep(&mut self, tr: &Trainer<'_>) -> Result<()> {
         if self.action != OnCollapse::Rollback
-            || tr.iteration % self.window != 0
+            || tr.iteration % self.round() != 0
             || !self.watch.healthy()
         {
             return Ok(());
@@ -138,5 +191,17 @@ impl CollapseGuard {
         }
         self.kept.push_back(tr.checkpoint()?);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn probe_views_spread_over_time() {
+        let times = [0.9, 0.1, 0.5, 0.3, 0.7, 0.0, 1.0];
+        // Sorted by time: 5 (0.0), 1, 3, 2, 4, 0, 6 (1.0).
+        assert_eq!(super::probe_views(&times), vec![5, 3, 4, 6]);
+        assert_eq!(super::probe_views(&[0.2, 0.1]), vec![1, 0]);
+        assert!(super::probe_views(&[]).is_empty());
     }
 }

@@ -63,14 +63,27 @@ pub struct Report {
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub time_to_psnr: Vec<crate::train::curve::TimeTo>,
     /// Collapses the run confirmed (`train` only; from `log.jsonl`, across resumes): when,
-    /// the windowed training PSNR before and after, and any rollback.
+    /// the probe views' PSNR before and after, and any rollback.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub collapses: Vec<crate::train::collapse::CollapseEvent>,
     /// Densification steps that removed most of the Gaussians (`train` only; from
     /// `log.jsonl`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub mass_prunes: Vec<crate::train::collapse::PruneEvent>,
+    /// How the run ended (`train` only): `ok`, `collapsed` (a collapse not rolled back, or a
+    /// final test PSNR below the initial one) or `rolled_back` (`rollbacks` times, and then
+    /// trained on), with the reason when not ok.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub status: Option<crate::train::collapse::RunStatus>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub status_note: Option<String>,
+    #[serde(skip_serializing_if = "is_zero")]
+    pub rollbacks: u32,
     pub per_frame: Vec<FrameEval>,
+}
+
+fn is_zero(v: &u32) -> bool {
+    *v == 0
 }
 
 /// Median wall ms per training step of one kind (what the step ran).
@@ -125,6 +138,9 @@ impl Report {
             time_to_psnr: Vec::new(),
             collapses: Vec::new(),
             mass_prunes: Vec::new(),
+            status: None,
+            status_note: None,
+            rollbacks: 0,
             per_frame: per,
         }
     }

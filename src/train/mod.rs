@@ -19,6 +19,7 @@ pub mod metrics;
 pub mod outputs;
 pub mod passes;
 pub mod plan;
+mod run_loop;
 pub mod score;
 pub mod session;
 pub mod step;
@@ -116,7 +117,7 @@ impl<'g> Trainer<'g> {
             gaussians: GaussianState::new(gpu, budget, cfg.sh_degree, &init)?,
             deform: DeformState::with_gain(
                 gpu,
-                mlp_config_of(synthetic, cfg),
+                mlp_config_of(synthetic, cfg.mlp_shape()),
                 cfg.seed,
                 cfg.zero_deform_head,
                 cfg.mlp_init_gain,
@@ -402,6 +403,16 @@ impl<'g> Trainer<'g> {
             }
         }
         Ok(curve::Probe::of(&frames, &probes))
+    }
+
+    /// PSNR of training frame `i` rendered as the model stands (the collapse guard's probe
+    /// views; render and photometric loss only, no training state changes).
+    pub fn train_view_psnr(&mut self, i: usize) -> Result<f64> {
+        let view = self.view();
+        let gpu = self.gpu;
+        self.evaluator()?;
+        let e = self.eval.as_mut().expect("built");
+        Ok(e.photometric(gpu, &self.model, view, &self.frames[i])?.psnr)
     }
 
     /// The displacement EPE probe of test frame `i` (`None` without a mask and ground-truth

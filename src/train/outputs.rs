@@ -56,6 +56,12 @@ pub struct LogLine {
     pub motion_p50_px: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion_p99_px: Option<f64>,
+    /// The collapse guard's probe views (fixed training frames): their mean latest PSNR and
+    /// their mean fall below their own best (dB).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_psnr: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_fall_db: Option<f64>,
     /// The worst training-view PSNR since the previous line, and that view's frame id.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub worst_psnr: Option<f64>,

@@ -7,8 +7,8 @@
 //! (Over ~600 lines with its unit tests: one schedule, a test for each of its parts.)
 
 use super::config::{
-    Background, CurriculumAnchor, DeformMode, MotionOrder, MotionSchedule, SparsityMode, TimeNoise,
-    TrainConfig,
+    Background, CurriculumAnchor, DeformMode, GradStat, MotionOrder, MotionSchedule, SparsityMode,
+    TimeNoise, TrainConfig,
 };
 use crate::model::optim::ExpLr;
 
@@ -141,6 +141,8 @@ pub struct StepPlan {
     pub lr: StepLr,
     /// The step accumulates densification statistics.
     pub densify_stats: bool,
+    /// Its backward also sums |∂L/∂mean2d| per pixel (the `abs` statistic).
+    pub abs_grad: bool,
     /// Densification (clone/split/prune) runs after the step; with the screen-size cut-off
     /// when the second member is set.
     pub densify: Option<bool>,
@@ -186,9 +188,15 @@ impl StepPlan {
                 roles: Decomposition::of(cfg.motion_order),
             }
         });
+        // The official loop: statistics and densification while `it < until`, densification
+        // after `from` every `interval`, with the size prunes once past the first opacity
+        // reset; resets every `opacity_reset_interval`, and once more at `from` on a white
+        // background.
         let d = &cfg.densify;
-        let densify = (it <= d.until && it > d.from && it % d.interval == 0)
+        let window = it < d.until;
+        let densify = (window && it > d.from && it % d.interval == 0)
             .then_some(it > d.opacity_reset_interval);
+        let white_reset = cfg.background == Background::White && it == d.from;
         let (sparse, split_due) = sparsity_at(cfg, it);
         StepPlan {
             iteration: it,
@@ -199,9 +207,10 @@ impl StepPlan {
             sh_degree: cfg.sh_degree.min((it - 1) / cfg.sh_interval),
             motion,
             lr: learning_rates(cfg, frames.extent, it),
-            densify_stats: it <= d.until,
+            densify_stats: window,
+            abs_grad: window && d.grad_stat == GradStat::Abs,
             densify,
-            opacity_reset: it <= d.until && it % d.opacity_reset_interval == 0,
+            opacity_reset: window && (it % d.opacity_reset_interval == 0 || white_reset),
             sparse,
             // Densification renumbers the Gaussians: a split model is probed again at once.
             classify: split_due || (sparse && densify.is_some()),
@@ -304,23 +313,25 @@ pub fn motion_weight_at(cfg: &TrainConfig, iteration: u32) -> f32 {
 
 fn learning_rates(cfg: &TrainConfig, extent: f32, it: u32) -> StepLr {
     let lr = &cfg.lr;
+    let (pos_scale, scaling_scale) = lr.spatial(extent);
+    let steps = |s: u32| if s > 0 { s } else { cfg.iterations };
     let pos = ExpLr {
-        lr_init: lr.position_init * extent as f64,
-        lr_final: lr.position_final * extent as f64,
+        lr_init: lr.position_init * pos_scale,
+        lr_final: lr.position_final * pos_scale,
         lr_delay_steps: 0,
         lr_delay_mult: lr.position_delay_mult,
-        max_steps: cfg.iterations,
+        max_steps: steps(lr.position_max_steps),
     };
     let deform = ExpLr {
         lr_init: lr.deform_init,
         lr_final: lr.deform_final,
         lr_delay_steps: 0,
         lr_delay_mult: lr.position_delay_mult,
-        max_steps: cfg.iterations,
+        max_steps: steps(lr.deform_max_steps),
     };
     StepLr {
         means: pos.at(it as i64),
-        log_scales: lr.scaling,
+        log_scales: lr.scaling * scaling_scale,
         quats: lr.rotation,
         opacity: lr.opacity,
         sh_dc: lr.feature,
@@ -443,13 +454,25 @@ mod tests {
         assert!((p(100).motion.unwrap().weight - 0.5).abs() < 1e-7);
         assert_eq!(m.t2, f.times[m.pair]);
         assert_ne!(m.pair, p(40).frame);
-        assert!(p(60).densify_stats && !p(61).densify_stats);
+        // `until` is exclusive, as the official `iteration < densify_until_iter`.
+        assert!(p(59).densify_stats && !p(60).densify_stats);
+        assert!(!p(59).abs_grad, "the fast preset's statistic is the norm");
         assert_eq!(
             (p(10).densify, p(25).densify, p(50).densify),
             (None, Some(false), Some(false))
         );
         assert_eq!(p(75).densify, None, "no densification after `until`");
         assert!(p(50).opacity_reset && !p(100).opacity_reset);
+        assert!(!p(10).opacity_reset, "no extra reset on a black background");
+        let mut w = c.clone();
+        w.background = Background::White;
+        w.densify.grad_stat = GradStat::Abs;
+        let pw = |it| StepPlan::at(&w, &f, it);
+        assert!(
+            pw(10).opacity_reset,
+            "the official extra reset at `from` on white"
+        );
+        assert!(pw(59).abs_grad && !pw(60).abs_grad);
         let mut c2 = c.clone();
         c2.densify.opacity_reset_interval = 20;
         assert_eq!(

@@ -76,6 +76,7 @@ pub fn record_step(
     let opts = RenderOpts {
         background: p.background,
         alpha_max: ALPHA_MAX,
+        abs_grad: p.abs_grad,
     };
     rec.set_zone("deform");
     s.deform

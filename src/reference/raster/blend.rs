@@ -253,6 +253,7 @@ pub fn blend_bwd_f64<T: Copy + Into<f64>>(
     let order = depth_order(proj);
     let mut g = BlendGrads {
         mean2d: vec![[0.0; 2]; n],
+        mean2d_abs: vec![[0.0; 2]; n],
         conic: vec![[0.0; 3]; n],
         opacity: vec![0.0; n],
         color: vec![[0.0; 3]; n],
@@ -298,8 +299,14 @@ pub fn blend_bwd_f64<T: Copy + Into<f64>>(
                 g.conic[i][0] += dsigma * 0.5 * e.dx * e.dx;
                 g.conic[i][1] += dsigma * e.dx * e.dy;
                 g.conic[i][2] += dsigma * 0.5 * e.dy * e.dy;
-                g.mean2d[i][0] += dsigma * (a * e.dx + b * e.dy);
-                g.mean2d[i][1] += dsigma * (b * e.dx + c * e.dy);
+                let gm = [
+                    dsigma * (a * e.dx + b * e.dy),
+                    dsigma * (b * e.dx + c * e.dy),
+                ];
+                for j in 0..2 {
+                    g.mean2d[i][j] += gm[j];
+                    g.mean2d_abs[i][j] += gm[j].abs();
+                }
             }
         }
     }

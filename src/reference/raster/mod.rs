@@ -257,6 +257,10 @@ pub struct BlendOut {
 #[derive(Clone, Debug, Default)]
 pub struct BlendGrads {
     pub mean2d: Vec<[f64; 2]>,
+    /// Σ over pixels of |each pixel's term of `mean2d`|, per component (what `blend_bwd`
+    /// writes to `grad2d`'s slots 10-11 with `abs_grad`: the official Deformable-3DGS
+    /// rasteriser's densification statistic).
+    pub mean2d_abs: Vec<[f64; 2]>,
     /// Wrt (a, b, c) of the conic, with `σ = ½(a dx² + c dy²) + b dx dy` (gsplat's convention).
     pub conic: Vec<[f64; 3]>,
     /// Wrt the sigmoid output.

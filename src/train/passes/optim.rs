@@ -135,12 +135,14 @@ impl DensifyPass {
         n: u32,
         skip: BufSlice<'_>,
     ) {
+        let abs = self.cfg.grad_stat == crate::train::config::GradStat::Abs;
         self.densifier
-            .record_stats(rec, &self.bufs, &render.bufs, n, Some(skip));
+            .record_stats(rec, &self.bufs, &render.bufs, n, Some(skip), abs);
     }
 
     /// Clone/split/prune into the next generation and make it current (reads the new count
-    /// back: this runs every hundred steps, between steps). `screen_cut`: prune by screen size.
+    /// back: this runs every hundred steps, between steps). `screen_cut`: the size prunes
+    /// (screen and world, each when configured) are due.
     pub fn densify(
         &self,
         gpu: &Gpu,
@@ -154,6 +156,11 @@ impl DensifyPass {
         s.percent_dense = d.percent_dense;
         s.min_opacity = d.min_opacity;
         s.max_screen_size = if screen_cut { d.max_screen_size } else { 0.0 };
+        s.max_world_size = if screen_cut {
+            d.max_world_size * self.extent
+        } else {
+            0.0
+        };
         s.seed = self.seed;
         s.iteration = it;
         let mut rec = Recorder::new(gpu)?;

@@ -299,6 +299,7 @@ impl Evaluator {
         let opts = RenderOpts {
             background: [0.0; 3],
             alpha_max: ALPHA_MAX,
+            abs_grad: false,
         };
         loop {
             let mut rec = Recorder::new(gpu)?;
@@ -402,6 +403,7 @@ impl Evaluator {
         let opts = RenderOpts {
             background: [0.0; 3],
             alpha_max: ALPHA_MAX,
+            abs_grad: false,
         };
         let active = view.deform_active;
         self.deform
