@@ -4,9 +4,11 @@ mod data_util;
 
 use std::path::Path;
 
-use dispflow_vk::data::synthetic::{self, GenCamera, Preset, Scene, SceneMotion};
+use dispflow_vk::data::synthetic::{
+    self, events, Ball, GenCamera, Hit, Preset, Scene, SceneMotion,
+};
 use dispflow_vk::data::{self, check, PointSource};
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 
 fn files(dir: &Path) -> Vec<std::path::PathBuf> {
     let mut out = Vec::new();
@@ -342,4 +344,283 @@ fn late_kind_rests_then_moves() {
     assert!(c.rgb != d.rgb && c.mask.contains(&1) && d.mask.contains(&1));
     let (e, _) = fixed_view_pair(&Scene::new(6), 0.5, 0.5);
     assert_eq!(d.rgb, e.rgb);
+}
+
+/// FNV-1a (64 bit) over every file of `dir`, in the byte order of their relative paths: each
+/// path, a zero byte, then the file's bytes.
+fn tree_checksum(dir: &Path) -> u64 {
+    let mut names: Vec<String> = files(dir)
+        .iter()
+        .map(|p| p.to_str().unwrap().to_string())
+        .collect();
+    names.sort();
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for name in &names {
+        let bytes = std::fs::read(dir.join(name)).unwrap();
+        for &b in name.as_bytes().iter().chain(&[0u8]).chain(&bytes) {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    h
+}
+
+/// Adding the `events` kind left the other kinds' files byte for byte as they were: checksums of
+/// the tiny scene (seed 0) recorded at b5d2a7f, before that kind existed (the PNG bytes also
+/// depend on the `png` crate's encoder, pinned by Cargo.lock).
+#[test]
+fn existing_kinds_match_recorded_checksums() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (motion, want) in [
+        (SceneMotion::Moving, 0xfac7_1436_fb8f_c285u64),
+        (SceneMotion::Static, 0x6845_f28e_56c9_4348),
+        (SceneMotion::Late, 0xa301_38bb_116d_6d65),
+    ] {
+        let dir = tmp.path().join(motion.name());
+        synthetic::generate_with(Preset::Tiny, 0, motion, &dir).unwrap();
+        assert_eq!(files(&dir).len(), 101, "{}", motion.name());
+        let got = tree_checksum(&dir);
+        assert_eq!(got, want, "{}: {got:#018x}", motion.name());
+    }
+}
+
+/// What every pixel of `cam` sees at frame time `t` (the same rays as `render_view`).
+fn hit_map(scene: &Scene, cam: &GenCamera, t: f64) -> Vec<Hit> {
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    (0..w * h)
+        .map(|o| {
+            let px = DVec2::new((o % w) as f64 + 0.5, (o / w) as f64 + 0.5);
+            scene.cast(cam.centre, cam.ray(px), t)
+        })
+        .collect()
+}
+
+fn ball_of(hit: &Hit) -> Option<Ball> {
+    match hit {
+        Hit::Event { ball, .. } => Some(*ball),
+        _ => None,
+    }
+}
+
+/// 4-connected components of `on` (`w` wide).
+fn components(on: &[bool], w: usize) -> usize {
+    let h = on.len() / w;
+    let mut seen = vec![false; on.len()];
+    let mut count = 0;
+    for start in 0..on.len() {
+        if !on[start] || seen[start] {
+            continue;
+        }
+        count += 1;
+        seen[start] = true;
+        let mut stack = vec![start];
+        while let Some(o) = stack.pop() {
+            let (i, j) = (o % w, o / w);
+            let mut near = Vec::with_capacity(4);
+            if i > 0 {
+                near.push(o - 1);
+            }
+            if i + 1 < w {
+                near.push(o + 1);
+            }
+            if j > 0 {
+                near.push(o - w);
+            }
+            if j + 1 < h {
+                near.push(o + w);
+            }
+            for q in near {
+                if on[q] && !seen[q] {
+                    seen[q] = true;
+                    stack.push(q);
+                }
+            }
+        }
+    }
+    count
+}
+
+/// The per-object hit query over every frame of a preset: the appearing sphere is seen exactly
+/// from `T_APPEAR` on, the vanishing one until `T_VANISH`, the splitting one whole until
+/// `T_SPLIT` and as two pieces after, two separate blobs once they have moved apart. Each is
+/// inside the frame and apart from the rigid sphere and the blob in every image.
+#[test]
+fn events_spheres_appear_vanish_and_split_on_schedule() {
+    use events::{T_APPEAR, T_SPLIT, T_VANISH};
+    let scene = Scene::with_motion(0, SceneMotion::Events);
+    for preset in [Preset::Tiny, Preset::Small] {
+        let (w, h, n, _) = preset.dims();
+        // A sphere of radius 0.25 covers ~30 pixels at 64×64, ~200 at 160×120.
+        let least = if preset == Preset::Tiny { 12 } else { 80 };
+        for k in 0..n {
+            let t = k as f64 / (n - 1) as f64;
+            let cam = GenCamera::for_frame(k, n, w, h);
+            let hits = hit_map(&scene, &cam, t);
+            let count = |b: Ball| hits.iter().filter(|x| ball_of(x) == Some(b)).count();
+            let what = format!("{} frame {k} (t = {t:.3})", preset.name());
+            let seen = |b: Ball, present: bool, least: usize| {
+                let c = count(b);
+                assert!(
+                    if present { c >= least } else { c == 0 },
+                    "{what}: {b:?} covers {c} pixels"
+                );
+            };
+            seen(Ball::Appearing, t >= T_APPEAR, least);
+            seen(Ball::Vanishing, t < T_VANISH, least);
+            seen(Ball::Splitting, t < T_SPLIT, least);
+            // Each piece hides half the other just after the split.
+            seen(Ball::PieceNeg, t >= T_SPLIT, least / 4);
+            seen(Ball::PiecePos, t >= T_SPLIT, least / 4);
+            let split: Vec<bool> = hits
+                .iter()
+                .map(|x| {
+                    matches!(
+                        ball_of(x),
+                        Some(Ball::Splitting | Ball::PieceNeg | Ball::PiecePos)
+                    )
+                })
+                .collect();
+            let blobs = components(&split, w as usize);
+            if t < T_SPLIT {
+                assert_eq!(blobs, 1, "{what}");
+            } else if t >= 0.8 {
+                assert_eq!(blobs, 2, "{what}: the pieces should be apart");
+            }
+            // In frame, and never next to the other objects' pixels (no contact, no occlusion).
+            let (wu, hu) = (w as usize, h as usize);
+            for (o, x) in hits.iter().enumerate() {
+                if ball_of(x).is_none() {
+                    continue;
+                }
+                let (i, j) = (o % wu, o / wu);
+                assert!(
+                    i > 0 && j > 0 && i + 1 < wu && j + 1 < hu,
+                    "{what}: {x:?} at the border"
+                );
+                for q in [o - 1, o + 1, o - wu, o + wu, o - wu - 1, o + wu + 1] {
+                    assert!(
+                        !matches!(hits[q], Hit::Rigid { .. } | Hit::Blob { .. }),
+                        "{what}: {x:?} touches {:?}",
+                        hits[q]
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// The written masks and flow of the `events` kind: finite flow, zero off the mask, and at the
+/// frames that hold an event, the conventions of `synthetic/events.rs`.
+#[test]
+fn events_masks_and_flow_follow_the_conventions() {
+    use events::{PIECE_SCALE, SPLIT_NORMAL};
+    let tmp = tempfile::tempdir().unwrap();
+    let s = synthetic::generate_with(Preset::Tiny, 0, SceneMotion::Events, tmp.path()).unwrap();
+    assert_eq!(s.motion, SceneMotion::Events);
+    assert_eq!(motion_recorded(tmp.path()), "events");
+    let info: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("synthetic.json")).unwrap()).unwrap();
+    assert_eq!(info["events"]["appearing"]["present"], "t >= 0.35");
+    let ds = data::load(tmp.path(), &data_util::opts()).unwrap();
+    assert_eq!(ds.frames().count(), 24);
+    let scene = Scene::with_motion(0, SceneMotion::Events);
+    let (w, n) = (64usize, 24usize);
+    let time = |k: usize| k as f64 / (n - 1) as f64;
+    // The frames whose interval [t_k, t_{k+1}] holds an event.
+    let holds = |e: f64| (0..n).find(|&k| time(k) < e && e <= time(k + 1)).unwrap();
+    let (k_appear, k_split, k_vanish) = (holds(0.35), holds(0.5), holds(0.65));
+    assert_eq!((k_appear, k_split, k_vanish), (8, 11, 14));
+    let mut checked = [0usize; 4];
+    for f in ds.frames() {
+        let k: usize = f.id.parse().unwrap();
+        let (m, flow) = (f.mask.as_ref().unwrap(), f.flow.as_ref().unwrap());
+        assert!(flow.iter().all(|v| v.is_finite()), "frame {k}");
+        for (i, &mv) in m.iter().enumerate() {
+            if mv == 0 {
+                assert_eq!(
+                    [flow[2 * i], flow[2 * i + 1]],
+                    [0.0, 0.0],
+                    "frame {k} px {i}"
+                );
+            }
+        }
+        assert!(m.contains(&1), "frame {k}: empty mask");
+        let (t, t2) = (time(k), time(k + 1));
+        let cam = GenCamera::for_frame(k, n, w as u32, w as u32);
+        let hits = hit_map(&scene, &cam, t);
+        let px_flow = |o: usize| DVec2::new(flow[2 * o] as f64, flow[2 * o + 1] as f64);
+        for (o, x) in hits.iter().enumerate() {
+            let (Some(ball), Hit::Event { p, .. }) = (ball_of(x), x) else {
+                continue;
+            };
+            // Every event sphere's pixel is masked, except the whole splitting sphere at rest.
+            let masked = ball != Ball::Splitting || k == k_split;
+            assert_eq!(m[o] == 1, masked, "frame {k}: {ball:?} at px {o}");
+            match ball {
+                Ball::Vanishing if k == k_vanish => {
+                    assert_eq!(px_flow(o), DVec2::ZERO, "frame {k}: vanishing px {o}");
+                    checked[0] += 1;
+                }
+                Ball::Splitting if k == k_split => {
+                    // The point follows the piece on its side of the plane, shrunk about it.
+                    let c = Ball::Splitting.centre(t);
+                    let piece = if (*p - c).dot(SPLIT_NORMAL) >= 0.0 {
+                        Ball::PiecePos
+                    } else {
+                        Ball::PieceNeg
+                    };
+                    let q = piece.centre(t2) + PIECE_SCALE * (*p - c);
+                    let want = cam.project(q).unwrap() - cam.project(*p).unwrap();
+                    assert!((px_flow(o) - want).length() < 1e-4, "frame {k} px {o}");
+                    assert!(want.length() > 1e-3);
+                    checked[1] += 1;
+                }
+                Ball::Splitting => assert_eq!(px_flow(o), DVec2::ZERO, "frame {k}: at rest"),
+                Ball::PieceNeg | Ball::PiecePos => {
+                    // Pure translation along ∓/± the split normal, which the arc sees as ∓/± x.
+                    let sign = if ball == Ball::PiecePos { 1.0 } else { -1.0 };
+                    assert!(sign * px_flow(o).x > 0.05, "frame {k}: {ball:?} px {o}");
+                    checked[2] += 1;
+                }
+                _ => assert!(px_flow(o).length() > 1e-4, "frame {k}: {ball:?} px {o}"),
+            }
+        }
+        if k == k_appear {
+            // Not there yet at t_k: where it will be (seen by camera k at t_{k+1}) is unmasked.
+            let next = hit_map(&scene, &cam, t2);
+            for (o, x) in next.iter().enumerate() {
+                if ball_of(x) == Some(Ball::Appearing) {
+                    assert!(matches!(hits[o], Hit::Room { .. }) && m[o] == 0);
+                    checked[3] += 1;
+                }
+            }
+        }
+    }
+    assert!(checked.iter().all(|&c| c >= 12), "{checked:?}");
+}
+
+/// `points.npy` of the `events` kind: the moving kind's first 7/8, then points on the spheres
+/// present at `t = 0` (the vanishing and the whole splitting one), none on the appearing one.
+#[test]
+fn events_points_cover_the_spheres_present_at_t0() {
+    let tmp = tempfile::tempdir().unwrap();
+    synthetic::generate_with(Preset::Tiny, 3, SceneMotion::Events, tmp.path()).unwrap();
+    let got = dispflow_vk::data::points::read_points_npy(&tmp.path().join("points.npy")).unwrap();
+    let want = synthetic::sample_points_with(3, 3000, SceneMotion::Events);
+    assert_eq!((got.len(), want.len()), (3000, 3000));
+    assert!(got
+        .iter()
+        .zip(&want)
+        .all(|(a, b)| (*a - *b).length() < 1e-5));
+    let moving = synthetic::sample_points(3, 3000);
+    assert_eq!(want[..2625], moving[..2625]);
+    let on = |p: DVec3, b: Ball| ((p - b.centre(0.0)).length() - b.radius()).abs() < 0.02;
+    let tail = &want[2625..];
+    assert!(tail
+        .iter()
+        .all(|&p| on(p, Ball::Vanishing) || on(p, Ball::Splitting)));
+    assert!(tail.iter().filter(|&&p| on(p, Ball::Vanishing)).count() > 150);
+    assert!(tail.iter().filter(|&&p| on(p, Ball::Splitting)).count() > 150);
+    let appears_at = Ball::Appearing.centre(events::T_APPEAR);
+    assert!(want.iter().all(|p| p.distance(appears_at) > 0.3));
 }

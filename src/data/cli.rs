@@ -30,7 +30,9 @@ pub enum DataCommand {
         seed: u64,
         /// How the objects move (the camera arc is the same in every kind): moving = throughout
         /// the sequence; static = frozen at their t = 0 pose, masks and flow all zero; late = at
-        /// rest for the first half, then their whole trajectory in the second half.
+        /// rest for the first half, then their whole trajectory in the second half; events = as
+        /// moving, plus small spheres that appear (t = 0.35), vanish (t = 0.65) and split in two
+        /// (t = 0.5).
         #[arg(long, value_enum, default_value_t = SceneMotion::Moving)]
         motion: SceneMotion,
     },

@@ -12,8 +12,10 @@
 //! A monocular camera moves slowly along an arc while time advances (frame `k` at
 //! `t_k = k/(N−1)`). The objects are posed at the scene time `motion.warp(t_k)` of the motion
 //! kind ([`SceneMotion`]): `moving` (scene time = frame time, the default), `static` (frozen at
-//! their `t = 0` pose) or `late` (at rest for the first half, then their whole trajectory in the
-//! second half); the camera arc is the same in every kind. Outputs, next to the nerfies files:
+//! their `t = 0` pose), `late` (at rest for the first half, then their whole trajectory in the
+//! second half) or `events` (as `moving`, plus three small spheres that appear, vanish and split
+//! in two: [`events`], whose module doc gives their masks, flow and points); the camera arc is
+//! the same in every kind. Outputs, next to the nerfies files:
 //! - `mask/1x/<id>.png.png`: 255 where the pixel sees an object (rigid sphere or blob) that moves
 //!   between `t_k` and `t_{k+1}` (its warped time changes), so all zero in the `static` kind;
 //! - `flow/<id>.npy`: `H×W×2` f32, for each of those pixels, the projection **by the same camera
@@ -29,8 +31,10 @@
 //!
 //! Over 600 lines: the primitives, their motion, the ray caster and the writer of every output
 //! file share one scene description; they split along those lines if the scene grows (the
-//! motion kinds' time warp already lives in `synthetic/motion.rs`).
+//! motion kinds' time warp lives in `synthetic/motion.rs`, the `events` kind's spheres in
+//! `synthetic/events.rs`).
 
+pub mod events;
 mod motion;
 
 use std::path::{Path, PathBuf};
@@ -42,6 +46,7 @@ use serde_json::json;
 
 use super::{image as img, points, progress_bar, DataError, DataResult};
 
+pub use events::Ball;
 pub use motion::SceneMotion;
 
 /// Size presets.
@@ -111,12 +116,13 @@ pub struct Scene {
     blob_colors: [DVec3; 2],
 }
 
-/// What a ray hit.
+/// What a ray hit (`Event`: one of the `events` kind's spheres).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Hit {
     Room { p: DVec3, n: DVec3, face: usize },
     Rigid { p: DVec3 },
     Blob { p: DVec3 },
+    Event { p: DVec3, ball: Ball },
 }
 
 impl Scene {
@@ -192,6 +198,7 @@ impl Scene {
                 let u = (p - BLOB_CENTRE).normalize();
                 BLOB_CENTRE + Self::blob_radius(u, t2) * u
             }
+            Hit::Event { p, ball } => events::advect(ball, p, t, t2),
         }
     }
 
@@ -274,12 +281,20 @@ impl Scene {
                         }
                         let s = 0.5 * (lo + hi);
                         if s < best {
+                            best = s;
                             hit = Hit::Blob { p: o + s * d };
                         }
                         break;
                     }
                     a = b;
                     fa = fb;
+                }
+            }
+        }
+        if self.motion == SceneMotion::Events {
+            if let Some((s, ball)) = events::cast(o, d, t) {
+                if s < best {
+                    hit = Hit::Event { p: o + s * d, ball };
                 }
             }
         }
@@ -326,6 +341,7 @@ impl Scene {
                 );
                 (c, g.normalize_or_zero())
             }
+            Hit::Event { p, ball } => events::shade(ball, p, t),
         };
         let lambert = n.dot(light).max(0.0);
         (albedo * (0.4 + 0.6 * lambert)).clamp(DVec3::ZERO, DVec3::ONE)
@@ -465,10 +481,18 @@ pub fn render_view(scene: &Scene, cam: &GenCamera, t: f64, t_next: f64) -> Rende
             let c = scene.shade_at(&hit, s);
             let o = j * w + i;
             rgb[o * 3..o * 3 + 3].copy_from_slice(&[c.x as f32, c.y as f32, c.z as f32]);
-            if moving && !matches!(hit, Hit::Room { .. }) {
+            let changes = match hit {
+                Hit::Room { .. } => false,
+                Hit::Rigid { .. } | Hit::Blob { .. } => moving,
+                Hit::Event { ball, .. } => events::changes(ball, s, s_next),
+            };
+            if changes {
                 mask[o] = 1;
                 let p = match hit {
-                    Hit::Rigid { p } | Hit::Blob { p } | Hit::Room { p, .. } => p,
+                    Hit::Rigid { p }
+                    | Hit::Blob { p }
+                    | Hit::Room { p, .. }
+                    | Hit::Event { p, .. } => p,
                 };
                 let p2 = Scene::advect(&hit, s, s_next);
                 if let (Some(a), Some(b)) = (cam.project(p), cam.project(p2)) {
@@ -481,8 +505,20 @@ pub fn render_view(scene: &Scene, cam: &GenCamera, t: f64, t_next: f64) -> Rende
     Rendered { rgb, mask, flow }
 }
 
+/// [`sample_points`] of the kind: the same for every kind but `events`, whose last `n/8` points
+/// lie on its spheres present at `t = 0` ([`events::sample_points`]).
+pub fn sample_points_with(seed: u64, n: usize, motion: SceneMotion) -> Vec<DVec3> {
+    if motion != SceneMotion::Events {
+        return sample_points(seed, n);
+    }
+    let m = n / 8;
+    let mut out = sample_points(seed, n - m);
+    out.extend(events::sample_points(seed, m));
+    out
+}
+
 /// Points on the surfaces at `t = 0` (raw world units), with ±0.01 uniform noise; `t = 0` is the
-/// rest pose of every motion kind.
+/// rest pose of every motion kind (the `events` kind adds its spheres: [`sample_points_with`]).
 pub fn sample_points(seed: u64, n: usize) -> Vec<DVec3> {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0xB0B);
     let noise = 0.01;
@@ -619,19 +655,20 @@ pub fn generate_with(
                 "near": 0.5 * SCENE_SCALE, "far": 16.0 * SCENE_SCALE,
                 "bbox": [ROOM_MIN.to_array(), ROOM_MAX.to_array()]}),
     )?;
-    write_json(
-        &out.join("synthetic.json"),
-        &json!({
-            "generator": "dispflow-vk data gen",
-            "preset": preset.name(), "seed": seed, "width": w, "height": h, "frames": n,
-            "motion": motion.name(),
-            "time": "frame k at t = k/(N-1); metadata time_id = k; the camera follows t, the objects are posed at warp(t)",
-            "warp": "moving: t; static: 0; late: 0 for t <= 0.5, else (t - 0.5) * 2",
-            "mask": "mask/1x/<id>.png.png: 255 = pixel sees an object (rigid sphere or deforming blob) whose warped time changes between t_k and t_{k+1}",
-            "flow": "flow/<id>.npy: HxWx2 f32 pixels; projection by camera k of the surface point at warp(t_{k+1}) minus at warp(t_k); 0 where the mask is 0",
-            "points": "points.npy: Nx3 f32 raw world positions on the surfaces at t=0, +-0.01 noise",
-        }),
-    )?;
+    let mut info = json!({
+        "generator": "dispflow-vk data gen",
+        "preset": preset.name(), "seed": seed, "width": w, "height": h, "frames": n,
+        "motion": motion.name(),
+        "time": "frame k at t = k/(N-1); metadata time_id = k; the camera follows t, the objects are posed at warp(t)",
+        "warp": "moving: t; static: 0; late: 0 for t <= 0.5, else (t - 0.5) * 2",
+        "mask": "mask/1x/<id>.png.png: 255 = pixel sees an object (rigid sphere or deforming blob) whose warped time changes between t_k and t_{k+1}",
+        "flow": "flow/<id>.npy: HxWx2 f32 pixels; projection by camera k of the surface point at warp(t_{k+1}) minus at warp(t_k); 0 where the mask is 0",
+        "points": "points.npy: Nx3 f32 raw world positions on the surfaces at t=0, +-0.01 noise",
+    });
+    if motion == SceneMotion::Events {
+        events::describe(&mut info);
+    }
+    write_json(&out.join("synthetic.json"), &info)?;
     let pb = progress_bar(n as u64, "rendering", true);
     (0..n).into_par_iter().try_for_each(|k| -> DataResult<()> {
         let cam = GenCamera::for_frame(k, n, w, h);
@@ -664,7 +701,7 @@ pub fn generate_with(
         Ok(())
     })?;
     pb.finish_and_clear();
-    let pts = sample_points(seed, n_points);
+    let pts = sample_points_with(seed, n_points, motion);
     let flat: Vec<f32> = pts
         .iter()
         .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
