@@ -374,6 +374,7 @@ fn splat_inputs(inputs: &[Buffer; 6], n: u32) -> SplatInputs<'_> {
         sh_coeffs: 16,
         sh_degree: 3,
         features: None,
+        opacity_scale: None,
     }
 }
 

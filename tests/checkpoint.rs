@@ -241,3 +241,67 @@ fn restore_refuses_non_finite_values_and_other_configurations() {
     assert_eq!(fresh.iteration, 4);
     assert!(fresh.checkpoint().unwrap() == good);
 }
+
+/// Transient Gaussians (format version 4): the header's count and the `time` / `velocity` blobs
+/// (with their moments) round-trip; a version-3 checkpoint, written before transients, still
+/// loads as a model without them.
+#[test]
+fn transients_round_trip_and_a_version_3_checkpoint_still_loads() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("last.ckpt");
+    let mut c = host_checkpoint();
+    for g in [
+        &mut c.model.gaussians,
+        &mut c.model.gauss_m,
+        &mut c.model.gauss_v,
+    ] {
+        g.transients = 1;
+        g.time = vec![[0.0, 0.0], [0.0, 0.0], [0.4, -3.0]];
+        g.velocity = vec![[0.0; 3], [0.0; 3], [0.5, -0.25, 1.0]];
+    }
+    c.model.gauss_v.time[2] = [0.01, 0.02]; // second moments are >= 0
+    c.model.gauss_v.velocity[2] = [0.1, 0.2, 0.3];
+    c.save(&p).unwrap();
+    assert_eq!(Checkpoint::load(&p).unwrap(), c);
+    let bytes = std::fs::read(&p).unwrap();
+    let (h, _) = header(&bytes);
+    assert_eq!(h["transients"], 1);
+    let names: Vec<&str> = h["blobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["name"].as_str().unwrap())
+        .collect();
+    for n in ["time", "velocity", "m.time", "v.velocity"] {
+        assert!(names.contains(&n), "{n} in {names:?}");
+    }
+    // Without transients nothing new is written; relabelled version 3, it loads.
+    let plain = tmp.path().join("plain.ckpt");
+    let c3 = host_checkpoint();
+    c3.save(&plain).unwrap();
+    let bytes = std::fs::read(&plain).unwrap();
+    let (mut h, blobs_at) = header(&bytes);
+    assert!(h.get("transients").is_none());
+    h["version"] = 3.into();
+    let hb = serde_json::to_vec(&h).unwrap();
+    let mut out = b"DFVKCKPT".to_vec();
+    out.extend_from_slice(&(hb.len() as u64).to_le_bytes());
+    out.extend_from_slice(&hb);
+    out.extend_from_slice(&dispflow_vk::train::checkpoint::fnv1a64(&hb).to_le_bytes());
+    out.extend_from_slice(&bytes[blobs_at..]);
+    std::fs::write(&plain, &out).unwrap();
+    assert_eq!(Checkpoint::load(&plain).unwrap(), c3);
+    // A header that claims more transients than Gaussians is refused by name.
+    let mut h2 = h.clone();
+    h2["version"] = CHECKPOINT_VERSION.into();
+    h2["transients"] = 9.into();
+    let hb = serde_json::to_vec(&h2).unwrap();
+    let mut out = b"DFVKCKPT".to_vec();
+    out.extend_from_slice(&(hb.len() as u64).to_le_bytes());
+    out.extend_from_slice(&hb);
+    out.extend_from_slice(&dispflow_vk::train::checkpoint::fnv1a64(&hb).to_le_bytes());
+    out.extend_from_slice(&bytes[blobs_at..]);
+    std::fs::write(&plain, &out).unwrap();
+    let e = load_err(&plain);
+    assert!(e.contains("9 transients among 3 Gaussians"), "{e}");
+}

@@ -199,7 +199,7 @@ fn run_densify(
     rec.finish().unwrap();
     let count = b.read_count(gpu).unwrap();
     assert!(count <= s.capacity, "count {count} > budget {}", s.capacity);
-    let dl = |buf| HostGaussians::download(gpu, &layout, buf, count).unwrap();
+    let dl = |buf| HostGaussians::download(gpu, &layout, buf, count, 0).unwrap();
     GpuOut {
         count,
         actions: b.read_actions(gpu, n).unwrap(),
@@ -398,7 +398,7 @@ fn consecutive_steps_with_swapped_buffers() {
     let b = dens.buffers(&gpu, layout.capacity).unwrap();
     let mut n = n0 as u32;
     for step in 0..2u32 {
-        let dl = |buf| HostGaussians::download(&gpu, &layout, buf, n).unwrap();
+        let dl = |buf| HostGaussians::download(&gpu, &layout, buf, n, 0).unwrap();
         let (p, m, v) = (dl(&model.params), dl(&model.m), dl(&model.v));
         let stats = random_stats(64 + step as u64, n as usize, layout.capacity as usize);
         upload_stats(&gpu, &b, &stats);
@@ -415,9 +415,9 @@ fn consecutive_steps_with_swapped_buffers() {
         let got = GpuOut {
             count,
             actions: b.read_actions(&gpu, n).unwrap(),
-            params: HostGaussians::download(&gpu, &layout, &model.params_next, count).unwrap(),
-            m: HostGaussians::download(&gpu, &layout, &model.m_next, count).unwrap(),
-            v: HostGaussians::download(&gpu, &layout, &model.v_next, count).unwrap(),
+            params: HostGaussians::download(&gpu, &layout, &model.params_next, count, 0).unwrap(),
+            m: HostGaussians::download(&gpu, &layout, &model.m_next, count, 0).unwrap(),
+            v: HostGaussians::download(&gpu, &layout, &model.v_next, count, 0).unwrap(),
             stats_after: read_stats(&gpu, &b, layout.capacity as usize),
         };
         compare(&format!("step {step}"), &got, &want, &p);
@@ -870,7 +870,7 @@ fn opacity_reset_matches_twin() {
     rec.finish().unwrap();
     let (mut pw, mut mw, mut vw) = (p.clone(), m.clone(), v.clone());
     twin::opacity_reset(&mut pw, &mut mw, &mut vw);
-    let dl = |buf| HostGaussians::download(&gpu, &layout, buf, n as u32).unwrap();
+    let dl = |buf| HostGaussians::download(&gpu, &layout, buf, n as u32, 0).unwrap();
     let (pg, mg, vg) = (dl(&model.params), dl(&model.m), dl(&model.v));
     assert_rows_exact("reset params", &pg, &pw, &vec![false; n]);
     assert_rows_exact("reset m", &mg, &mw, &vec![false; n]);

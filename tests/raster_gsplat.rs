@@ -106,6 +106,7 @@ fn run(name: &str) {
         sh_coeffs: 16,
         sh_degree: 3,
         features: None,
+        opacity_scale: None,
     };
     let opts = RenderOpts {
         background: [0.0; 3],

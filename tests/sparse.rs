@@ -252,6 +252,7 @@ fn model(gpu: &dispflow_vk::vk::Gpu, n: usize, seed: u64) -> Model {
         deform: DeformState::new(gpu, mlp_config_for(true, 3, 32), seed, false).unwrap(),
         dynamic: DynamicSet::new(gpu, n as u32).unwrap(),
         nodes: None,
+        transient: Default::default(),
     }
 }
 
@@ -407,6 +408,7 @@ fn late_mover_is_picked_up_by_the_next_split() {
         deform: DeformState::new(&gpu, cfg, 1, true).unwrap(),
         dynamic: DynamicSet::new(&gpu, n as u32).unwrap(),
         nodes: None,
+        transient: Default::default(),
     };
     let sizes = StepSizes {
         capacity: n as u32,

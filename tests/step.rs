@@ -631,6 +631,7 @@ mod gpu_step {
             deform,
             dynamic: DynamicSet::new(gpu, cap).unwrap(),
             nodes: field.map(|f| NodeState::new(gpu, f, cap).unwrap()),
+            transient: Default::default(),
         };
         if split {
             let all = SplitSnapshot {
@@ -739,6 +740,9 @@ mod gpu_step {
                 sh_dc: 0.0,
                 sh_rest: 0.0,
                 deform: Some((0.0, 1)),
+                centre: 0.0,
+                log_width: 0.0,
+                velocity: 0.0,
             },
             densify_stats: false,
             abs_grad: false,
@@ -746,6 +750,7 @@ mod gpu_step {
             opacity_reset: false,
             sparse: split,
             classify: false,
+            spawn: false,
         };
         let mut rec = Recorder::new(gpu).unwrap();
         record_step(&mut rec, &plan, &model, &mut passes, &frames, 0.2);

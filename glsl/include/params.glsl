@@ -200,6 +200,10 @@ struct ProjectParams {
     uint sh_coeffs;   // SH coefficients stored per Gaussian (1, 4, 9, 16)
     uint sh_degree;   // active degree (<= sqrt(sh_coeffs) - 1)
     uint isect_capacity;
+    uint opacity_scale; // project/project_bwd: multiply each opacity by op_scale[i] (0: culled)
+    uint pad0;
+    uint pad1;
+    uint pad2;
 };
 
 // src/kernels/raster.rs — per-tile α-blending, forward and backward.
@@ -233,6 +237,18 @@ struct DeformParams {
     uint pad0;  // D ≡ 0 is a separate stage (deform_static*), not a flag
     uint pad1;
     uint pad2;
+};
+
+// src/kernels/temporal.rs — transient (time-local) Gaussians: rows [first, n).
+struct TemporalParams {
+    uint n;           // rows: every live Gaussian
+    uint first;       // first transient row (rows below: the canonical population)
+    float t;          // the time drawn (t1 of a displacement)
+    float log_floor;  // ln σ_floor: σ = exp(max(τ, log_floor))
+    float cutoff;     // opacity factors below: culled (w = 0)
+    float t2;         // displacement: the pair's time, δ = v·(t2 − t)
+    float t_lo;       // peak: the time range of the largest weight
+    float t_hi;
 };
 
 // src/kernels/densify.rs — per-view densification statistics (after every backward pass).

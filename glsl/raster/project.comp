@@ -1,7 +1,9 @@
 #version 460
 // Per Gaussian: camera-space mean, EWA-projected and dilated 2D covariance, conic, screen
-// radius and tile rectangle, view-dependent SH colour and sigmoid opacity. Culled Gaussians
-// (behind the near plane, degenerate covariance, off screen) touch zero tiles.
+// radius and tile rectangle, view-dependent SH colour and sigmoid opacity (times op_scale[i]
+// when pc.opacity_scale: a transient's temporal weight). Culled Gaussians (opacity factor 0,
+// behind the near plane, degenerate covariance, off screen) touch zero tiles; a zero factor
+// culls before any projection work.
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 #include "params.glsl"
@@ -20,19 +22,29 @@ layout(std430, binding = 5) readonly buffer ShRest { float sh_rest[]; };       /
 layout(std430, binding = 6) writeonly buffer Splats { vec4 splats[]; };        // [N,3]
 layout(std430, binding = 7) writeonly buffer Rects { uvec4 rects[]; };         // [N]
 layout(std430, binding = 8) writeonly buffer Counts { uint counts[]; };        // [N] tiles touched
+layout(std430, binding = 9) readonly buffer OpScale { float op_scale[]; };     // [N] (opacity_scale)
+
+void cull(uint i) {
+    splats[SPLAT_STRIDE * i] = vec4(0.0);
+    splats[SPLAT_STRIDE * i + 1] = vec4(0.0);
+    splats[SPLAT_STRIDE * i + 2] = vec4(0.0);
+    rects[i] = uvec4(0);
+    counts[i] = 0;
+}
 
 void main() {
     uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.num_gaussians) return;
+    float w = pc.opacity_scale != 0u ? op_scale[i] : 1.0;
+    if (!(w > 0.0)) { // not alive at this time (or a NaN factor)
+        cull(i);
+        return;
+    }
     vec3 mean = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
     vec3 scale = vec3(scales[3 * i], scales[3 * i + 1], scales[3 * i + 2]);
     Proj r = project_gaussian(pc, mean, scale, quats[i]);
     if (!r.visible) {
-        splats[SPLAT_STRIDE * i] = vec4(0.0);
-        splats[SPLAT_STRIDE * i + 1] = vec4(0.0);
-        splats[SPLAT_STRIDE * i + 2] = vec4(0.0);
-        rects[i] = uvec4(0);
-        counts[i] = 0;
+        cull(i);
         return;
     }
     // View direction from the camera centre (-rotᵀ·trans); detached in the backward pass.
@@ -49,7 +61,7 @@ void main() {
         col += b[k] * vec3(sh_rest[o], sh_rest[o + 1], sh_rest[o + 2]);
     }
     col = max(col + 0.5, vec3(0.0));
-    splats[SPLAT_STRIDE * i] = vec4(r.mean2d, r.p.z, sigmoid(logits[i]));
+    splats[SPLAT_STRIDE * i] = vec4(r.mean2d, r.p.z, sigmoid(logits[i]) * w);
     splats[SPLAT_STRIDE * i + 1] = vec4(r.conic, r.radius);
     splats[SPLAT_STRIDE * i + 2] = vec4(col, 0.0);
     rects[i] = r.rect;

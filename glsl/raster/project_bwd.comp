@@ -6,6 +6,8 @@
 // into mean2d, J (with
 // the 1.3×fov clamp: a clamped coordinate passes no gradient to x or y, only through z) and
 // depth. The SH view direction is detached, as in 3DGS/gsplat. Culled Gaussians get zeros.
+// With pc.opacity_scale the splat's opacity was σ(o)·w (w = op_scale[i]): ∂L/∂o picks up the
+// factor w and ∂L/∂w = g_op·σ(o) goes to d_op_scale (a transient's temporal weight).
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 #include "params.glsl"
@@ -27,6 +29,8 @@ layout(std430, binding = 9) writeonly buffer DQuats { vec4 d_quats[]; };
 layout(std430, binding = 10) writeonly buffer DOpacity { float d_logits[]; };
 layout(std430, binding = 11) writeonly buffer DShDc { float d_sh_dc[]; };
 layout(std430, binding = 12) writeonly buffer DShRest { float d_sh_rest[]; };
+layout(std430, binding = 13) readonly buffer OpScale { float op_scale[]; };     // [N] (opacity_scale)
+layout(std430, binding = 14) writeonly buffer DOpScale { float d_op_scale[]; }; // [N] (opacity_scale)
 
 // Coefficient k of Gaussian i: the DC band and the rest live in separate buffers.
 void write_dsh(uint i, uint k, vec3 v) {
@@ -54,13 +58,17 @@ void write3(uint i, vec3 dm, vec3 ds) {
 void main() {
     uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     if (i >= pc.num_gaussians) return;
+    float op_w = pc.opacity_scale != 0u ? op_scale[i] : 1.0;
     vec3 mean = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
     vec3 scale = vec3(scales[3 * i], scales[3 * i + 1], scales[3 * i + 2]);
-    Proj r = project_gaussian(pc, mean, scale, quats[i]);
+    Proj r;
+    r.visible = false;
+    if (op_w > 0.0) r = project_gaussian(pc, mean, scale, quats[i]);
     if (!r.visible) {
         write3(i, vec3(0.0), vec3(0.0));
         d_quats[i] = vec4(0.0);
         d_logits[i] = 0.0;
+        if (pc.opacity_scale != 0u) d_op_scale[i] = 0.0;
         for (uint k = 0; k < pc.sh_coeffs; ++k) write_dsh(i, k, vec3(0.0));
         return;
     }
@@ -87,7 +95,8 @@ void main() {
     vec3 g_raw = g_col * vec3(greaterThan(raw, vec3(0.0)));
     for (uint k = 0; k < pc.sh_coeffs; ++k) write_dsh(i, k, k < nb ? b[k] * g_raw : vec3(0.0));
 
-    d_logits[i] = g_op * sigmoid_grad(logits[i]);
+    d_logits[i] = g_op * op_w * sigmoid_grad(logits[i]);
+    if (pc.opacity_scale != 0u) d_op_scale[i] = g_op * sigmoid(logits[i]);
 
     // conic = Σ2⁻¹, G the symmetric gradient (b appears twice): ∂L/∂Σ2 = −C·G·C. Formed as a
     // matrix in f32, C loses its smallest eigenvalue 1/λ_max (a needle's length) and every

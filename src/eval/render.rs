@@ -53,7 +53,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub flow: bool,
     /// Also write the deformed Gaussians of every frame as standard 3DGS .ply files
-    /// (`ply/frame_NNNN.ply`) plus `ply/canonical.ply`.
+    /// (`ply/frame_NNNN.ply`: with the transient Gaussians alive at that frame) plus
+    /// `ply/canonical.ply` (and `ply/transients.ply` with their times and velocities).
     #[arg(long)]
     pub ply: bool,
     /// With --ply: also pack the per-frame PLYs into `ply/sequence.zip`, which brush's viewer
@@ -271,7 +272,13 @@ pub fn run_render(a: &RenderArgs) -> Result<Vec<PathBuf>> {
             path: dir.display().to_string(),
             source,
         })?;
-        write_ply(&dir.join("canonical.ply"), &tr.gaussians()?)?;
+        // The canonical population (what the deformation moves); the transients' own file
+        // beside it, as the run writes them.
+        let (canonical, transients) = tr.gaussians()?.split_transients();
+        write_ply(&dir.join("canonical.ply"), &canonical)?;
+        if !transients.is_empty() {
+            write_ply(&dir.join("transients.ply"), &transients)?;
+        }
     }
     if a.gif && (a.fps == 0 || a.fps > 100) {
         return Err(Error::Invalid(format!(

@@ -95,7 +95,25 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
         ));
     }
     let ply = need("point_cloud.ply")?;
-    let gaussians = read_ply(&ply)?;
+    let mut gaussians = read_ply(&ply)?;
+    if gaussians.transients > 0 {
+        return Err(invalid(
+            &ply,
+            "holds transient Gaussians; a run writes them to transients.ply",
+        ));
+    }
+    // The transient Gaussians (a run with `transient.mode = on`), after the canonical ones.
+    let tply = dir.join("transients.ply");
+    if tply.is_file() {
+        let t = read_ply(&tply)?;
+        if t.sh_coeffs != gaussians.sh_coeffs || t.transients != t.len() {
+            return Err(invalid(
+                &tply,
+                "expected transient Gaussians with point_cloud.ply's SH coefficients",
+            ));
+        }
+        gaussians.append(&t);
+    }
     let coeffs = (cfg.sh_degree + 1).pow(2);
     if gaussians.sh_coeffs != coeffs {
         return Err(invalid(

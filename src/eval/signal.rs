@@ -423,7 +423,7 @@ impl Probe {
             let mut rec = Recorder::new(gpu)?;
             let active = view.deform_active;
             self.deform
-                .forward(&mut rec, model, Slot::T1, active.then_some(fa.time));
+                .forward(&mut rec, model, Slot::T1, fa.time, active);
             if active {
                 self.deform.mlp_forward(&mut rec, model, Slot::T2, t2);
                 let (o1, o2) = (self.deform.output(Slot::T1), self.deform.output(Slot::T2));
@@ -432,11 +432,13 @@ impl Probe {
             } else {
                 rec.fill(self.delta.all(), 0);
             }
-            self.deform.apply(&mut rec, model, Slot::T2, active);
-            let mut s1 = g.splats(self.deform.drawn(Slot::T1), view.sh_degree);
+            self.deform
+                .transient_displacement(&mut rec, model, (fa.time, t2), self.delta.all());
+            self.deform.apply(&mut rec, model, Slot::T2, t2, active);
+            let mut s1 = self.deform.splats(model, Slot::T1, view.sh_degree);
             s1.features = Some((self.delta.all(), 3));
             self.r1.forward(&mut rec, &fa.camera, &s1, &opts);
-            let s2 = g.splats(self.deform.drawn(Slot::T2), view.sh_degree);
+            let s2 = self.deform.splats(model, Slot::T2, view.sh_degree);
             self.r2.forward(&mut rec, &fa.camera, &s2, &opts);
             self.watch.record(&mut rec, 0, &self.r1);
             self.watch.record(&mut rec, 1, &self.r2);

@@ -244,6 +244,15 @@ impl DensifyBuffers {
         Ok(gpu.read::<u32>(self.count.elems::<u32>(0, 1))?[0])
     }
 
+    /// Output rows of the last densify step's originals `0..i` of its `n` (read after its
+    /// submit): rows keep their originals' order, so this is where original `i`'s rows begin.
+    pub fn read_rows_before(&self, gpu: &Gpu, i: u32, n: u32) -> Result<u32> {
+        if i >= n {
+            return self.read_count(gpu);
+        }
+        Ok(gpu.read::<u32>(self.offsets.elems::<u32>(i as u64, 1))?[0])
+    }
+
     /// The internal scratch buffers (action, growth, rows, offsets, count), so tests can fill
     /// them with noise first.
     #[doc(hidden)]
@@ -380,6 +389,24 @@ impl Densifier {
         n: u32,
         s: &DensifySettings,
     ) -> Result<()> {
+        self.record_densify_pruning(rec, b, src, dst, n, s, None)
+    }
+
+    /// [`Self::record_densify`] with the opacity the prune compares given per Gaussian as a
+    /// logit (`prune_logits` [N]; `None`: the parameters' own). Transients are pruned by their
+    /// largest opacity over the sequence (`kernels::temporal`'s `peak`); only the decision
+    /// changes, the rows written are the parameters as they are.
+    #[allow(clippy::too_many_arguments)] // the densify step's own arguments plus the override
+    pub fn record_densify_pruning(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &DensifyBuffers,
+        src: GaussianBuffers<'_>,
+        dst: GaussianBuffers<'_>,
+        n: u32,
+        s: &DensifySettings,
+        prune_logits: Option<BufSlice<'_>>,
+    ) -> Result<()> {
         s.validate(n)?;
         assert_eq!(
             src.layout, dst.layout,
@@ -442,7 +469,7 @@ impl Densifier {
                 u32s(&b.growth),
                 u32s(&b.max_radii),
                 f(src.params),
-                layout.slice(src.params, Section::Opacity, n),
+                prune_logits.unwrap_or(layout.slice(src.params, Section::Opacity, n)),
                 u32s(&b.action),
                 u32s(&b.rows),
             ],

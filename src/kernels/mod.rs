@@ -19,6 +19,7 @@ pub mod radix_sort;
 pub mod raster;
 pub mod scan;
 pub mod sparse;
+pub mod temporal;
 
 /// (Rust struct name, size in bytes, [(field, byte offset)]) of one push-constant struct.
 pub type ParamLayout = (&'static str, usize, Vec<(&'static str, usize)>);
@@ -66,6 +67,17 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         layout!(sparse::FlagParams, n, threshold_px, pad0, pad1),
         layout!(sparse::RowsParams, n, width, pad0, pad1),
         layout!(nodes::NodesParams, n, m, k, flags),
+        layout!(
+            temporal::TemporalParams,
+            n,
+            first,
+            t,
+            log_floor,
+            cutoff,
+            t2,
+            t_lo,
+            t_hi
+        ),
         layout!(
             densify::DensifyStatsParams,
             num_gaussians,
@@ -145,7 +157,11 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             num_gaussians,
             sh_coeffs,
             sh_degree,
-            isect_capacity
+            isect_capacity,
+            opacity_scale,
+            pad0,
+            pad1,
+            pad2
         ),
         layout!(
             raster::BlendParams,

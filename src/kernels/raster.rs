@@ -109,6 +109,11 @@ pub struct ProjectParams {
     pub sh_coeffs: u32,
     pub sh_degree: u32,
     pub isect_capacity: u32,
+    /// 1: each opacity is multiplied by `SplatInputs::opacity_scale` (bound at 9 / 13).
+    pub opacity_scale: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// Mirrors `BlendParams` in glsl/include/params.glsl (checked by tests/layout.rs).
@@ -165,6 +170,9 @@ pub struct SplatInputs<'a> {
     pub sh_coeffs: u32,
     pub sh_degree: u32,
     pub features: Option<(BufSlice<'a>, u32)>,
+    /// [N] factors each opacity is multiplied by (0 culls the Gaussian before projection):
+    /// the transients' temporal weights. `None`: 1.
+    pub opacity_scale: Option<BufSlice<'a>>,
 }
 
 impl SplatInputs<'_> {
@@ -230,6 +238,8 @@ pub struct RasterBuffers {
     pub d_scales: Buffer,
     pub d_quats: Buffer,
     pub d_opacity_logits: Buffer,
+    /// [N] ∂L/∂(opacity factor) when the splats had `opacity_scale`.
+    pub d_op_scale: Buffer,
     pub d_sh_dc: Buffer,
     /// [N, sh_coeffs − 1, 3]
     pub d_sh_rest: Buffer,
@@ -513,6 +523,7 @@ impl Rasterizer {
             d_scales: gpu.buffer("raster d scales", n * 3 * f)?,
             d_quats: gpu.buffer("raster d quats", n * 4 * f)?,
             d_opacity_logits: gpu.buffer("raster d opacity logits", n * f)?,
+            d_op_scale: gpu.buffer("raster d opacity factor", n * f)?,
             d_sh_dc: gpu.buffer("raster d sh dc", n * 3 * f)?,
             d_sh_rest: gpu.buffer(
                 "raster d sh rest",
@@ -568,6 +579,8 @@ impl Rasterizer {
             sh_coeffs: g.sh_coeffs,
             sh_degree: g.sh_degree,
             isect_capacity: b.isect_capacity,
+            opacity_scale: g.opacity_scale.is_some() as u32,
+            ..Default::default()
         }
     }
 
@@ -624,6 +637,8 @@ impl Rasterizer {
                 b.splats.all(),
                 b.rects.all(),
                 b.counts.all(),
+                // Not read without the flag; bound to keep the layout.
+                g.opacity_scale.unwrap_or(g.opacity_logits),
             ],
             g.n,
         );
@@ -784,6 +799,8 @@ impl Rasterizer {
                 b.d_opacity_logits.all(),
                 b.d_sh_dc.all(),
                 b.d_sh_rest.all(),
+                g.opacity_scale.unwrap_or(g.opacity_logits),
+                b.d_op_scale.all(),
             ],
             g.n,
         );

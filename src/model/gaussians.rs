@@ -20,16 +20,32 @@ pub enum Section {
     ShDc,
     /// SH bands 1.. [N, sh_coeffs − 1, 3].
     ShRest,
+    /// Transients' time centre c [N] (rows of the canonical population: unused).
+    TimeCentre,
+    /// Transients' log temporal width τ [N] (σ = exp τ, floored where used).
+    TimeLogWidth,
+    /// Transients' velocity v [N,3] (world units per unit of time).
+    Velocity,
 }
 
 impl Section {
-    pub const ALL: [Section; 6] = [
+    pub const ALL: [Section; 9] = [
         Section::Means,
         Section::LogScales,
         Section::Quats,
         Section::Opacity,
         Section::ShDc,
         Section::ShRest,
+        Section::TimeCentre,
+        Section::TimeLogWidth,
+        Section::Velocity,
+    ];
+
+    /// The transients' own sections (learnt for rows of the transient population only).
+    pub const TEMPORAL: [Section; 3] = [
+        Section::TimeCentre,
+        Section::TimeLogWidth,
+        Section::Velocity,
     ];
 }
 
@@ -53,9 +69,9 @@ impl GaussianLayout {
     /// Floats per Gaussian in `s`.
     pub fn row_len(&self, s: Section) -> u32 {
         match s {
-            Section::Means | Section::LogScales | Section::ShDc => 3,
+            Section::Means | Section::LogScales | Section::ShDc | Section::Velocity => 3,
             Section::Quats => 4,
-            Section::Opacity => 1,
+            Section::Opacity | Section::TimeCentre | Section::TimeLogWidth => 1,
             Section::ShRest => 3 * (self.sh_coeffs - 1),
         }
     }
@@ -74,7 +90,7 @@ impl GaussianLayout {
 
     /// Floats in the whole buffer.
     pub fn total_floats(&self) -> u64 {
-        let last = Section::ShRest;
+        let last = Section::Velocity;
         (self.offset(last) + self.capacity as u64 * self.row_len(last) as u64).max(1)
     }
 
@@ -85,8 +101,14 @@ impl GaussianLayout {
 
     /// The first `n` rows of section `s` of `buf` (at least one float, so it can be bound).
     pub fn slice<'a>(&self, buf: &'a Buffer, s: Section, n: u32) -> BufSlice<'a> {
-        let floats = (n as u64 * self.row_len(s) as u64).max(1);
-        buf.slice(self.offset(s) * 4, floats * 4)
+        self.rows(buf, s, 0, n)
+    }
+
+    /// Rows `first..first + n` of section `s` of `buf` (at least one float).
+    pub fn rows<'a>(&self, buf: &'a Buffer, s: Section, first: u32, n: u32) -> BufSlice<'a> {
+        let row = self.row_len(s) as u64;
+        let floats = (n as u64 * row).max(1);
+        buf.slice((self.offset(s) + first as u64 * row) * 4, floats * 4)
     }
 }
 
@@ -101,6 +123,13 @@ pub struct HostGaussians {
     pub sh_dc: Vec<[f32; 3]>,
     /// [N, sh_coeffs − 1, 3] flattened per Gaussian.
     pub sh_rest: Vec<f32>,
+    /// The last `transients` rows are transient Gaussians (time-local; see
+    /// `kernels::temporal`); the rows before them the canonical population.
+    pub transients: usize,
+    /// Per row (c, τ): time centre and log temporal width; empty = zeros (no transients).
+    pub time: Vec<[f32; 2]>,
+    /// Per row velocity; empty = zeros.
+    pub velocity: Vec<[f32; 3]>,
 }
 
 /// SH DC coefficient giving colour `c` (colour = C0·dc + 0.5).
@@ -148,35 +177,141 @@ impl HostGaussians {
                 .map(|i| colors.map_or([0.0; 3], |c| c[i].map(rgb_to_sh_dc)))
                 .collect(),
             sh_rest: vec![0.0; n * 3 * (sh_coeffs as usize - 1)],
+            ..Default::default()
         })
+    }
+
+    /// Rows of the canonical population (the rest are transients).
+    pub fn canonical(&self) -> usize {
+        self.len() - self.transients.min(self.len())
+    }
+
+    /// The temporal sections, zeros where empty.
+    pub fn time_or_zeros(&self) -> Vec<[f32; 2]> {
+        if self.time.len() == self.len() {
+            self.time.clone()
+        } else {
+            vec![[0.0; 2]; self.len()]
+        }
+    }
+
+    pub fn velocity_or_zeros(&self) -> Vec<[f32; 3]> {
+        if self.velocity.len() == self.len() {
+            self.velocity.clone()
+        } else {
+            vec![[0.0; 3]; self.len()]
+        }
+    }
+
+    /// Rows `range` as their own Gaussians (transient rows stay transient).
+    pub fn rows(&self, range: std::ops::Range<usize>) -> HostGaussians {
+        let r = 3 * (self.sh_coeffs as usize).saturating_sub(1);
+        let first_t = self.canonical();
+        let (time, vel) = (self.time_or_zeros(), self.velocity_or_zeros());
+        let transients = range.clone().filter(|&i| i >= first_t).count();
+        HostGaussians {
+            sh_coeffs: self.sh_coeffs,
+            means: self.means[range.clone()].to_vec(),
+            log_scales: self.log_scales[range.clone()].to_vec(),
+            quats: self.quats[range.clone()].to_vec(),
+            opacity: self.opacity[range.clone()].to_vec(),
+            sh_dc: self.sh_dc[range.clone()].to_vec(),
+            sh_rest: self.sh_rest[range.start * r..range.end * r].to_vec(),
+            transients,
+            time: if transients > 0 {
+                time[range.clone()].to_vec()
+            } else {
+                Vec::new()
+            },
+            velocity: if transients > 0 {
+                vel[range].to_vec()
+            } else {
+                Vec::new()
+            },
+        }
+    }
+
+    /// The canonical rows and the transient rows.
+    pub fn split_transients(&self) -> (HostGaussians, HostGaussians) {
+        let c = self.canonical();
+        (self.rows(0..c), self.rows(c..self.len()))
+    }
+
+    /// `other`'s rows appended after these (transients stay last: `other`'s canonical rows
+    /// go before this one's transients only when this one has none).
+    pub fn append(&mut self, other: &HostGaussians) {
+        assert_eq!(self.sh_coeffs, other.sh_coeffs, "append: SH layouts differ");
+        assert!(
+            self.transients == 0 || other.transients == other.len(),
+            "append: canonical rows after transients"
+        );
+        let (time, vel) = (self.time_or_zeros(), self.velocity_or_zeros());
+        self.time = time;
+        self.velocity = vel;
+        self.time.extend(other.time_or_zeros());
+        self.velocity.extend(other.velocity_or_zeros());
+        self.means.extend_from_slice(&other.means);
+        self.log_scales.extend_from_slice(&other.log_scales);
+        self.quats.extend_from_slice(&other.quats);
+        self.opacity.extend_from_slice(&other.opacity);
+        self.sh_dc.extend_from_slice(&other.sh_dc);
+        self.sh_rest.extend_from_slice(&other.sh_rest);
+        self.transients += other.transients;
     }
 
     /// Writes the Gaussians into rows 0..N of the sections of `buf` (laid out by `layout`).
     pub fn upload(&self, gpu: &Gpu, layout: &GaussianLayout, buf: &Buffer) -> Result<()> {
-        if self.len() > layout.capacity as usize || self.sh_coeffs != layout.sh_coeffs {
+        self.upload_at(gpu, layout, buf, 0)
+    }
+
+    /// Writes the Gaussians into rows `first..first + N` of the sections of `buf`.
+    pub fn upload_at(
+        &self,
+        gpu: &Gpu,
+        layout: &GaussianLayout,
+        buf: &Buffer,
+        first: u32,
+    ) -> Result<()> {
+        if first as usize + self.len() > layout.capacity as usize
+            || self.sh_coeffs != layout.sh_coeffs
+        {
             return Err(Error::Capacity {
                 what: "Gaussian buffer (capacity, SH coefficients)",
                 capacity: layout.capacity as u64,
-                asked: self.len() as u64,
+                asked: first as u64 + self.len() as u64,
             });
         }
         if self.is_empty() {
             return Ok(());
         }
         let n = self.len() as u32;
-        gpu.upload(layout.slice(buf, Section::Means, n), &self.means)?;
-        gpu.upload(layout.slice(buf, Section::LogScales, n), &self.log_scales)?;
-        gpu.upload(layout.slice(buf, Section::Quats, n), &self.quats)?;
-        gpu.upload(layout.slice(buf, Section::Opacity, n), &self.opacity)?;
-        gpu.upload(layout.slice(buf, Section::ShDc, n), &self.sh_dc)?;
+        let at = |s| layout.rows(buf, s, first, n);
+        gpu.upload(at(Section::Means), &self.means)?;
+        gpu.upload(at(Section::LogScales), &self.log_scales)?;
+        gpu.upload(at(Section::Quats), &self.quats)?;
+        gpu.upload(at(Section::Opacity), &self.opacity)?;
+        gpu.upload(at(Section::ShDc), &self.sh_dc)?;
         if layout.sh_coeffs > 1 {
-            gpu.upload(layout.slice(buf, Section::ShRest, n), &self.sh_rest)?;
+            gpu.upload(at(Section::ShRest), &self.sh_rest)?;
         }
+        let time = self.time_or_zeros();
+        let c: Vec<f32> = time.iter().map(|t| t[0]).collect();
+        let tau: Vec<f32> = time.iter().map(|t| t[1]).collect();
+        gpu.upload(at(Section::TimeCentre), &c)?;
+        gpu.upload(at(Section::TimeLogWidth), &tau)?;
+        gpu.upload(at(Section::Velocity), &self.velocity_or_zeros())?;
         Ok(())
     }
 
-    /// Reads rows 0..n of `buf`.
-    pub fn download(gpu: &Gpu, layout: &GaussianLayout, buf: &Buffer, n: u32) -> Result<Self> {
+    /// Reads rows 0..n of `buf`, the last `transients` of them transients (their temporal
+    /// sections are read only when there are any).
+    pub fn download(
+        gpu: &Gpu,
+        layout: &GaussianLayout,
+        buf: &Buffer,
+        n: u32,
+        transients: u32,
+    ) -> Result<Self> {
         if n == 0 {
             return Ok(HostGaussians {
                 sh_coeffs: layout.sh_coeffs,
@@ -192,6 +327,19 @@ impl HostGaussians {
             sh_dc: gpu.read(layout.slice(buf, Section::ShDc, n))?,
             sh_rest: if layout.sh_coeffs > 1 {
                 gpu.read(layout.slice(buf, Section::ShRest, n))?
+            } else {
+                Vec::new()
+            },
+            transients: transients.min(n) as usize,
+            time: if transients > 0 {
+                let c: Vec<f32> = gpu.read(layout.slice(buf, Section::TimeCentre, n))?;
+                let tau: Vec<f32> = gpu.read(layout.slice(buf, Section::TimeLogWidth, n))?;
+                c.into_iter().zip(tau).map(|(a, b)| [a, b]).collect()
+            } else {
+                Vec::new()
+            },
+            velocity: if transients > 0 {
+                gpu.read(layout.slice(buf, Section::Velocity, n))?
             } else {
                 Vec::new()
             },

@@ -17,6 +17,9 @@ pub struct GaussianState {
     pub layout: GaussianLayout,
     /// Live Gaussians.
     pub n: u32,
+    /// The last `transients` live rows are transient (time-local) Gaussians; rows
+    /// `0..n − transients` are the canonical population the deformation moves.
+    pub transients: u32,
     pub params: Buffer,
     pub grads: Buffer,
     pub m: Buffer,
@@ -42,6 +45,7 @@ impl GaussianState {
         let s = GaussianState {
             layout,
             n: init.len() as u32,
+            transients: init.transients as u32,
             params: mk("gaussian params")?,
             grads: mk("gaussian grads")?,
             m: mk("gaussian adam m")?,
@@ -60,14 +64,46 @@ impl GaussianState {
         Ok(s)
     }
 
-    /// After densification wrote the next generation (`next`) with `n` Gaussians: make it the
-    /// current one (the old buffers become the next scratch).
-    pub fn swap_generation(&mut self, n: u32) {
+    /// After densification wrote the next generation (`next`) with `n` Gaussians, the last
+    /// `transients` of them transients: make it the current one (the old buffers become the
+    /// next scratch).
+    pub fn swap_generation(&mut self, n: u32, transients: u32) {
         let [p, m, v] = &mut self.next;
         std::mem::swap(&mut self.params, p);
         std::mem::swap(&mut self.m, m);
         std::mem::swap(&mut self.v, v);
         self.n = n;
+        self.transients = transients.min(n);
+    }
+
+    /// Rows of the canonical population (what the deformation runs over).
+    pub fn deformed(&self) -> u32 {
+        self.n - self.transients.min(self.n)
+    }
+
+    /// Appends `g` (transients: `g.transients == g.len()`) after the live rows, with zero
+    /// Adam moments. The caller keeps the densification statistics of the new rows at zero.
+    pub fn append_transients(&mut self, gpu: &Gpu, g: &HostGaussians) -> Result<()> {
+        if g.transients != g.len() {
+            return Err(Error::Invalid(
+                "append_transients: only transient rows can be appended".into(),
+            ));
+        }
+        if g.is_empty() {
+            return Ok(());
+        }
+        g.upload_at(gpu, &self.layout, &self.params, self.n)?;
+        let k = g.len() as u32;
+        let mut rec = Recorder::new(gpu)?;
+        for s in Section::ALL {
+            for b in [&self.m, &self.v] {
+                rec.fill(self.layout.rows(b, s, self.n, k), 0);
+            }
+        }
+        rec.finish()?;
+        self.n += k;
+        self.transients += k;
+        Ok(())
     }
 
     /// Rows `0..n` of section `s` of the parameters.
@@ -112,11 +148,12 @@ impl GaussianState {
             sh_coeffs: self.layout.sh_coeffs,
             sh_degree,
             features: None,
+            opacity_scale: None,
         }
     }
 
     pub fn download(&self, gpu: &Gpu) -> Result<HostGaussians> {
-        HostGaussians::download(gpu, &self.layout, &self.params, self.n)
+        HostGaussians::download(gpu, &self.layout, &self.params, self.n, self.transients)
     }
 
     /// Replaces the live Gaussians by `g` (parameters only; moments untouched).
@@ -136,6 +173,7 @@ impl GaussianState {
         }
         g.upload(gpu, &self.layout, &self.params)?;
         self.n = g.len() as u32;
+        self.transients = g.transients as u32;
         Ok(())
     }
 }
@@ -267,6 +305,27 @@ pub struct Model {
     pub dynamic: DynamicSet,
     /// The control nodes when the deformation field is `nodes` (the MLP then runs at them).
     pub nodes: Option<NodeState>,
+    /// How the transient rows are drawn (the temporal stage's constants).
+    pub transient: TransientShape,
+}
+
+/// The temporal stage's constants of a model (see `kernels::temporal`): σ's floor, the cull
+/// threshold, and the time range a transient's largest weight is taken over.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransientShape {
+    pub log_floor: f32,
+    pub cutoff: f32,
+    pub t_range: [f32; 2],
+}
+
+impl Default for TransientShape {
+    fn default() -> Self {
+        TransientShape {
+            log_floor: (0.02f32).ln(),
+            cutoff: 0.01,
+            t_range: [0.0, 1.0],
+        }
+    }
 }
 
 /// What a model was built for that its blobs do not show: MLP depth and width (the parameter
@@ -349,6 +408,17 @@ pub fn gaussian_blobs<'a>(prefix: &str, g: &'a HostGaussians, non_negative: bool
         ("sh_rest", &g.sh_rest[..], rest),
     ]
     .into_iter()
+    .chain(
+        (g.transients > 0 && g.time.len() == g.len())
+            .then(|| {
+                [
+                    ("time", g.time.as_flattened(), 2),
+                    ("velocity", g.velocity.as_flattened(), 3),
+                ]
+            })
+            .into_iter()
+            .flatten(),
+    )
     .map(|(k, data, row)| Blob {
         name: format!("{prefix}{k}"),
         data,
@@ -414,8 +484,8 @@ impl Model {
         Ok(ModelSnapshot {
             shape: self.shape(),
             gaussians: g.download(gpu)?,
-            gauss_m: HostGaussians::download(gpu, &g.layout, &g.m, g.n)?,
-            gauss_v: HostGaussians::download(gpu, &g.layout, &g.v, g.n)?,
+            gauss_m: HostGaussians::download(gpu, &g.layout, &g.m, g.n, g.transients)?,
+            gauss_v: HostGaussians::download(gpu, &g.layout, &g.v, g.n, g.transients)?,
             mlp_params: gpu.read(d.params.all())?,
             mlp_m: gpu.read(d.m.all())?,
             mlp_v: gpu.read(d.v.all())?,

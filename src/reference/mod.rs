@@ -19,3 +19,4 @@ pub mod scan;
 pub mod sh;
 pub mod sparse;
 pub mod step;
+pub mod temporal;

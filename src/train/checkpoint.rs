@@ -7,7 +7,9 @@
 //! Gaussian budget) and per blob its name, length in floats and FNV-1a 64 of its bytes (hex).
 //! Every length and checksum is checked on read; a mismatch names the file and the blob.
 //! The optional blobs `dynamic` (0.0/1.0 per Gaussian) and `dynamic_fixed` (10 per Gaussian)
-//! are the model's dynamic/static split.
+//! are the model's dynamic/static split. Version 4 adds the transient Gaussians: the header's
+//! `transients` (the last rows) and the blobs `time` (c, τ per Gaussian) and `velocity` (with
+//! their moments `m.`/`v.`), present only when there are transients.
 //! Small and dependency-free.
 
 use std::collections::BTreeMap;
@@ -27,10 +29,10 @@ const MAGIC: &[u8; 8] = b"DFVKCKPT";
 
 /// The checkpoint format this build writes and reads. Version 1 (no checksums, no model
 /// shape) is refused with a message that says so.
-pub const CHECKPOINT_VERSION: u32 = 3;
-/// Older formats this build still reads: version 2 lacks only the optional control-node blobs
-/// and shape fields (an MLP-field run).
-const READS_VERSIONS: [u32; 2] = [2, 3];
+pub const CHECKPOINT_VERSION: u32 = 4;
+/// Older formats this build still reads: version 3 lacks only the transients (a run without
+/// them), version 2 also the optional control-node blobs and shape fields (an MLP-field run).
+const READS_VERSIONS: [u32; 3] = [2, 3, 4];
 
 /// Names of the densification statistics blobs, in [`Checkpoint::densify_stats`] order.
 pub const DENSIFY_STATS: [&str; 3] = ["grad_accum", "denom", "max_radii"];
@@ -59,6 +61,13 @@ struct Header {
     blobs: Vec<BlobEntry>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     deform_lr_scale: Option<f64>,
+    /// The last rows that are transient Gaussians (version 4; 0 before).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    transients: u32,
+}
+
+fn is_zero(v: &u32) -> bool {
+    *v == 0
 }
 
 #[derive(Serialize, Deserialize)]
@@ -88,6 +97,7 @@ fn take_gauss(
     prefix: &str,
     m: &mut BTreeMap<String, Vec<f32>>,
     sh_coeffs: u32,
+    transients: u32,
     path: &Path,
 ) -> Result<HostGaussians> {
     let mut get = |k: &str| {
@@ -129,6 +139,34 @@ fn take_gauss(
         }
     }
     let [means, log_scales, quats, opacity, sh_dc, sh_rest] = raw;
+    if transients as usize > n {
+        return Err(bad(
+            path,
+            &format!("header: {transients} transients among {n} Gaussians"),
+        ));
+    }
+    let (mut time, mut velocity) = (Vec::new(), Vec::new());
+    if transients > 0 {
+        for (k, row) in [("time", 2), ("velocity", 3)] {
+            let v = m
+                .remove(&format!("{prefix}{k}"))
+                .ok_or_else(|| bad(path, &format!("blob {prefix}{k} missing")))?;
+            if v.len() != n * row {
+                return Err(bad(
+                    path,
+                    &format!(
+                        "blob {prefix}{k}: {} floats; {n} Gaussians need {}",
+                        v.len(),
+                        n * row
+                    ),
+                ));
+            }
+            match row {
+                2 => time = arr::<2>(v),
+                _ => velocity = arr::<3>(v),
+            }
+        }
+    }
     Ok(HostGaussians {
         sh_coeffs,
         means: arr::<3>(means),
@@ -137,6 +175,9 @@ fn take_gauss(
         opacity,
         sh_dc: arr::<3>(sh_dc),
         sh_rest,
+        transients: transients as usize,
+        time,
+        velocity,
     })
 }
 
@@ -208,6 +249,7 @@ impl Checkpoint {
             sh_coeffs: self.model.gaussians.sh_coeffs,
             shape: self.model.shape,
             deform_lr_scale: self.deform_lr_scale,
+            transients: self.model.gaussians.transients as u32,
             blobs: blobs
                 .iter()
                 .map(|(k, v)| BlobEntry {
@@ -255,8 +297,8 @@ impl Checkpoint {
                 return Err(bad(
                     path,
                     &format!(
-                        "format version {v}; this build reads version {CHECKPOINT_VERSION} (and 2, \
-                         written before the control-node field) \
+                        "format version {v}; this build reads version {CHECKPOINT_VERSION} (and 3, \
+                         written before transients, and 2, before the control-node field) \
                          (start the run again without --resume, or resume with the build \
                          that wrote it)"
                     ),
@@ -320,9 +362,10 @@ impl Checkpoint {
                 &format!("{} trailing bytes after the last blob", bytes.len() - at),
             ));
         }
-        let gaussians = take_gauss("", &mut m, sc, path)?;
-        let gauss_m = take_gauss("m.", &mut m, sc, path)?;
-        let gauss_v = take_gauss("v.", &mut m, sc, path)?;
+        let tr = header.transients;
+        let gaussians = take_gauss("", &mut m, sc, tr, path)?;
+        let gauss_m = take_gauss("m.", &mut m, sc, tr, path)?;
+        let gauss_v = take_gauss("v.", &mut m, sc, tr, path)?;
         let mut get = |k: &str| {
             m.remove(k)
                 .ok_or_else(|| bad(path, &format!("blob {k} missing")))
@@ -472,8 +515,20 @@ pub fn is_kept_checkpoint(p: &Path) -> bool {
 
 /// Writes canonical Gaussians as the standard 3DGS PLY (binary little endian): x y z, nx ny nz
 /// (zeros), f_dc_0..2, f_rest_* (channel-major, as 3DGS stores them), opacity (logit),
-/// scale_0..2 (log), rot_0..3 (w x y z). Common splat viewers read this layout.
+/// scale_0..2 (log), rot_0..3 (w x y z). Common splat viewers read this layout. Transient
+/// Gaussians (all of `g`'s rows must then be transients) add t_centre, t_log_width and vx, vy,
+/// vz: a run writes them apart, to `transients.ply`.
 pub fn write_ply(path: &Path, g: &HostGaussians) -> Result<()> {
+    let temporal = g.transients > 0;
+    if temporal && g.transients != g.len() {
+        return Err(Error::Invalid(format!(
+            "{}: a PLY holds canonical or transient Gaussians, not both ({} of {} transient)",
+            path.display(),
+            g.transients,
+            g.len()
+        )));
+    }
+    let (time, vel) = (g.time_or_zeros(), g.velocity_or_zeros());
     let rest = 3 * (g.sh_coeffs as usize - 1);
     let mut h = String::from("ply\nformat binary_little_endian 1.0\n");
     h += &format!("element vertex {}\n", g.len());
@@ -489,6 +544,9 @@ pub fn write_ply(path: &Path, g: &HostGaussians) -> Result<()> {
         ]
         .map(String::from),
     );
+    if temporal {
+        props.extend(["t_centre", "t_log_width", "vx", "vy", "vz"].map(String::from));
+    }
     for p in &props {
         h += &format!("property float {p}\n");
     }
@@ -507,6 +565,10 @@ pub fn write_ply(path: &Path, g: &HostGaussians) -> Result<()> {
         row.push(g.opacity[i]);
         row.extend(g.log_scales[i]);
         row.extend(g.quats[i]);
+        if temporal {
+            row.extend(time[i]);
+            row.extend(vel[i]);
+        }
         out.extend_from_slice(bytemuck::cast_slice(&row));
     }
     write_atomic(path, &out)
@@ -565,8 +627,14 @@ pub fn read_ply(path: &Path) -> Result<HostGaussians> {
     );
     let r0 = if rest > 0 { idx("f_rest_0")? } else { 0 };
     let k = rest / 3;
+    // A transients file (`write_ply` with temporal properties): every row is a transient.
+    let temporal = match props.iter().position(|p| p == "t_centre") {
+        Some(c) => Some((c, idx("t_log_width")?, idx("vx")?)),
+        None => None,
+    };
     let mut g = HostGaussians {
         sh_coeffs: (k + 1) as u32,
+        transients: if temporal.is_some() { n } else { 0 },
         ..Default::default()
     };
     for i in 0..n {
@@ -582,6 +650,10 @@ pub fn read_ply(path: &Path) -> Result<HostGaussians> {
         g.log_scales.push([row[sc], row[sc + 1], row[sc + 2]]);
         g.quats
             .push([row[rot], row[rot + 1], row[rot + 2], row[rot + 3]]);
+        if let Some((c, w, v)) = temporal {
+            g.time.push([row[c], row[w]]);
+            g.velocity.push([row[v], row[v + 1], row[v + 2]]);
+        }
     }
     Ok(g)
 }

@@ -182,6 +182,12 @@ pub struct TrainArgs {
     /// is not its cause and the run goes on without rolling back) [default: warn].
     #[arg(long, value_enum)]
     pub on_collapse: Option<super::collapse::OnCollapse>,
+    /// Transient Gaussians: on (a second population, local in time, spawned every
+    /// transient.every steps where the frames with the largest residual are wrong: for what
+    /// moves most of its size per frame, appears, vanishes or splits; config [transient]) or
+    /// off [default: off].
+    #[arg(long, value_enum)]
+    pub transients: Option<super::config::TransientMode>,
     /// Keep every checkpoint as OUT/checkpoints/NNNNNN.ckpt (for `dispflow-vk signal`).
     #[arg(long)]
     pub keep_checkpoints: bool,
@@ -275,6 +281,7 @@ pub fn resolve_config_with(
     sm.level = a.flow_level.unwrap_or(sm.level);
     sm.kind = a.scene_motion.unwrap_or(sm.kind);
     sm.mask_px = a.motion_mask.unwrap_or(sm.mask_px);
+    c.transient.mode = a.transients.unwrap_or(c.transient.mode);
     c.keep_checkpoints |= a.keep_checkpoints;
     c.collapse.on_collapse = a.on_collapse.unwrap_or(c.collapse.on_collapse);
     c.validate()?;

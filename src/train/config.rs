@@ -296,6 +296,81 @@ pub struct TrainConfig {
     /// (SC-GS: the MLP at a few hundred nodes, blended into every Gaussian; docs/nodes.md).
     #[serde(default)]
     pub deform_field: crate::model::nodes::FieldConfig,
+    /// Transient (time-local) Gaussians spawned from the residual (see [`TransientConfig`]).
+    #[serde(default)]
+    pub transient: TransientConfig,
+}
+
+/// Whether the model grows transient Gaussians.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum TransientMode {
+    /// The canonical population alone (Deformable-3DGS).
+    #[default]
+    Off,
+    /// Transients spawn where the frames with the largest residual are wrong.
+    On,
+}
+
+/// Transient Gaussians (issue 37, `kernels::temporal`): a second population, local in time,
+/// for what one canonical space plus a deformation cannot draw (an object that moves most of
+/// its size per frame under a new camera each frame, appears, vanishes or splits). Every
+/// `every` steps in [`from`, `until`] × iterations the `frames` training frames with the
+/// lowest PSNR at their last step are rendered; their `pixels` worst pixels above `min_error`
+/// are back-projected at `depths` depths along the ray inside the scene's bounds into
+/// transients centred at that frame's time. Times are in frame spacings (the median gap
+/// between consecutive training times), so no transient lives in one camera's view only.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TransientConfig {
+    pub mode: TransientMode,
+    /// σ's floor, in frame spacings.
+    pub floor_frames: f32,
+    /// A new transient's σ, in frame spacings (at least the floor).
+    pub init_frames: f32,
+    /// Opacity factors below this are culled before projection.
+    pub cutoff: f32,
+    pub every: u32,
+    pub from: f32,
+    pub until: f32,
+    pub frames: u32,
+    pub pixels: u32,
+    pub depths: u32,
+    /// Mean absolute RGB error (colours in [0, 1]) a pixel needs to spawn transients.
+    pub min_error: f32,
+    /// Opacity of a new transient.
+    pub init_opacity: f32,
+    /// Most of the Gaussian budget transients may hold.
+    pub max_share: f32,
+    /// Learning rates of the time centre (time units), of the log-width, and of the velocity
+    /// as a multiple of the position rate per σ floor (a transient then moves about as far
+    /// within its life per step as a canonical Gaussian does).
+    pub lr_centre: f64,
+    pub lr_width: f64,
+    pub lr_velocity_mult: f64,
+}
+
+impl Default for TransientConfig {
+    fn default() -> Self {
+        TransientConfig {
+            mode: TransientMode::Off,
+            floor_frames: 3.0,
+            init_frames: 3.0,
+            cutoff: 0.01,
+            every: 100,
+            from: 0.2,
+            until: 0.8,
+            frames: 4,
+            pixels: 64,
+            depths: 4,
+            min_error: 0.12,
+            init_opacity: 0.3,
+            max_share: 0.5,
+            lr_centre: 0.002,
+            lr_width: 0.01,
+            lr_velocity_mult: 1.0,
+        }
+    }
 }
 
 /// A time curriculum: the training frames are drawn from the frames whose time ranks lie in a
@@ -575,6 +650,7 @@ impl TrainConfig {
             collapse: super::collapse::CollapseConfig::default(),
             curriculum: CurriculumConfig::default(),
             deform_field: Default::default(),
+            transient: TransientConfig::default(),
         }
     }
 
@@ -908,6 +984,44 @@ impl TrainConfig {
         if self.motion_weight > 0.0 {
             super::method::validate(self)?;
         }
+        let tc = &self.transient;
+        if tc.mode == TransientMode::On {
+            if self.sparsity.mode == SparsityMode::Auto {
+                bad(
+                    "transient.mode",
+                    "\"on\" with sparsity.mode = \"auto\"",
+                    "sparsity off (the dynamic split does not know the transient rows yet)",
+                )?;
+            }
+            at_least_1("transient.every", tc.every)?;
+            at_least_1("transient.frames", tc.frames)?;
+            at_least_1("transient.pixels", tc.pixels)?;
+            at_least_1("transient.depths", tc.depths)?;
+        }
+        for (field, v) in [
+            ("transient.floor_frames", tc.floor_frames),
+            ("transient.init_frames", tc.init_frames),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                bad(field, v, "a finite value > 0 (frame spacings)")?;
+            }
+        }
+        unit("transient.cutoff", tc.cutoff as f64)?;
+        unit("transient.from", tc.from as f64)?;
+        unit("transient.until", tc.until as f64)?;
+        unit("transient.max_share", tc.max_share as f64)?;
+        unit("transient.init_opacity", tc.init_opacity as f64)?;
+        if !(tc.init_opacity > 0.0 && tc.init_opacity < 1.0) {
+            bad(
+                "transient.init_opacity",
+                tc.init_opacity,
+                "a value in (0, 1)",
+            )?;
+        }
+        non_negative("transient.min_error", tc.min_error as f64)?;
+        non_negative("transient.lr_centre", tc.lr_centre)?;
+        non_negative("transient.lr_width", tc.lr_width)?;
+        non_negative("transient.lr_velocity_mult", tc.lr_velocity_mult)?;
         let sp = &self.sparsity;
         non_negative("sparsity.threshold_px", sp.threshold_px as f64)?;
         non_negative("sparsity.noise_k", sp.noise_k as f64)?;

@@ -164,6 +164,7 @@ pub fn initial_gaussians(data: &Dataset, cfg: &TrainConfig) -> Result<(HostGauss
             .iter()
             .flat_map(|&i| host.sh_rest[i * r..(i + 1) * r].to_vec())
             .collect(),
+        ..Default::default()
     };
     Ok((sub, report))
 }

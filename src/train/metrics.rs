@@ -79,6 +79,13 @@ pub struct Report {
     pub status_note: Option<String>,
     #[serde(skip_serializing_if = "is_zero")]
     pub rollbacks: u32,
+    /// The populations at the end (`train` only, with transients on): canonical Gaussians (the
+    /// deformation's; `dynamic_fraction` of them move when the model is split) and transient
+    /// ones, and the transients' share of the budget.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gaussians_canonical: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gaussians_transient: Option<u32>,
     pub per_frame: Vec<FrameEval>,
 }
 
@@ -141,6 +148,8 @@ impl Report {
             status: None,
             status_note: None,
             rollbacks: 0,
+            gaussians_canonical: None,
+            gaussians_transient: None,
             per_frame: per,
         }
     }

@@ -23,6 +23,7 @@ mod run_loop;
 pub mod score;
 pub mod session;
 pub mod step;
+pub mod transients;
 
 use std::rc::Rc;
 
@@ -34,7 +35,7 @@ use crate::kernels::raster::{Camera, Rasterizer};
 use crate::model::dynamic::DynamicSet;
 use crate::model::gaussians::HostGaussians;
 use crate::model::nodes::{FieldKind, NodeState};
-use crate::model::state::{mlp_config_of, DeformState, GaussianState, Model};
+use crate::model::state::{mlp_config_of, DeformState, GaussianState, Model, TransientShape};
 use crate::train::score::lpips::LpipsScorer;
 use crate::train::score::{Evaluator, FrameEval, ModelView};
 use crate::vk::{Gpu, Recorder, Timings};
@@ -92,6 +93,28 @@ pub struct Trainer<'g> {
     pub init_report: init::InitReport,
     /// Multiplier of the deformation's learning rate (halved by each collapse rollback).
     pub deform_lr_scale: f64,
+    /// Per training frame, the PSNR of the last step that trained it (NaN: not yet): where
+    /// transients are spawned.
+    pub frame_psnr: Vec<f32>,
+    /// The scene's bounds and the near distance (where spawned transients may lie).
+    bounds: crate::data::Bounds,
+    /// The last spawn of transients and its iteration.
+    pub last_spawn: Option<(u32, transients::SpawnReport)>,
+}
+
+/// The temporal stage's constants for training frames `train`: σ's floor in time units
+/// (`transient.floor_frames` × the median gap between consecutive training times) and the
+/// sequence's time range.
+pub fn transient_shape(cfg: &TrainConfig, train: &[GpuFrame]) -> TransientShape {
+    let times: Vec<f32> = train.iter().map(|f| f.time).collect();
+    let spacing = plan::median_gap(&times);
+    let lo = times.iter().copied().fold(f32::INFINITY, f32::min);
+    let hi = times.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    TransientShape {
+        log_floor: (cfg.transient.floor_frames * spacing).max(1e-6).ln(),
+        cutoff: cfg.transient.cutoff,
+        t_range: if lo <= hi { [lo, hi] } else { [0.0, 1.0] },
+    }
 }
 
 impl<'g> Trainer<'g> {
@@ -126,6 +149,7 @@ impl<'g> Trainer<'g> {
             nodes: (cfg.deform_field.kind == FieldKind::Nodes && cfg.deform == DeformMode::On)
                 .then(|| NodeState::new(gpu, cfg.deform_field, budget))
                 .transpose()?,
+            transient: transient_shape(cfg, &train),
         };
         let sizes = StepSizes {
             capacity: budget,
@@ -146,6 +170,7 @@ impl<'g> Trainer<'g> {
             frames::camera_extent(&data.train),
         );
         let raster = Rc::new(Rasterizer::new(gpu)?);
+        let n_train = train.len();
         // Settings the passes read, checked now (the passes themselves are built on the first
         // step: `eval` and `render` open a run without allocating training scratch).
         cfg.scene_motion.flow_config(&cfg.flow_preset)?;
@@ -166,6 +191,9 @@ impl<'g> Trainer<'g> {
             last_plan: None,
             init_report,
             deform_lr_scale: 1.0,
+            frame_psnr: vec![f32::NAN; n_train],
+            bounds: data.bounds,
+            last_spawn: None,
         })
     }
 
@@ -256,9 +284,15 @@ impl<'g> Trainer<'g> {
             }
             self.iteration = p.iteration;
             self.last_plan = Some(p);
+            if let Some((v, _)) = self.last_loss() {
+                self.frame_psnr[p.frame] = v.psnr as f32;
+            }
             self.densify_if_due(&p)?;
             if p.classify {
                 self.classify()?;
+            }
+            if p.spawn {
+                self.spawn_transients()?;
             }
             return Ok(if want_values {
                 Some(StepLog {
@@ -297,7 +331,14 @@ impl<'g> Trainer<'g> {
     fn densify_if_due(&mut self, p: &StepPlan) -> Result<()> {
         let d = &self.passes.as_ref().expect("a step ran").densify;
         if let Some(screen_cut) = p.densify {
-            d.densify(self.gpu, &mut self.model.gaussians, p.iteration, screen_cut)?;
+            let tr = self.model.transient;
+            d.densify(
+                self.gpu,
+                &mut self.model.gaussians,
+                tr,
+                p.iteration,
+                screen_cut,
+            )?;
             if let Some(ns) = self.model.nodes.as_mut() {
                 ns.invalidate_knn(); // new rows, and survivors moved to other rows
             }
@@ -305,6 +346,56 @@ impl<'g> Trainer<'g> {
         if p.opacity_reset {
             d.reset_opacity(self.gpu, &self.model.gaussians)?;
         }
+        Ok(())
+    }
+
+    /// Spawns transients from the frames with the lowest PSNR at their last step (see
+    /// `transients`), within the budget's share for them.
+    pub fn spawn_transients(&mut self) -> Result<()> {
+        let tc = self.cfg.transient;
+        let g = &self.model.gaussians;
+        let cap = g.layout.capacity as usize;
+        let share = (tc.max_share as f64 * cap as f64) as usize;
+        let room = (cap - g.n as usize).min(share.saturating_sub(g.transients as usize));
+        let mut report = transients::SpawnReport::default();
+        let mut all = HostGaussians {
+            sh_coeffs: g.layout.sh_coeffs,
+            ..Default::default()
+        };
+        let view = self.view();
+        let spacing = self.times.spacing;
+        for i in transients::worst_frames(&self.frame_psnr, tc.frames as usize) {
+            let f = &self.frames[i];
+            let (camera, time) = (f.camera, f.time);
+            let gt: Vec<[f32; 4]> = self.gpu.read(f.target.all())?;
+            let gpu = self.gpu;
+            self.evaluator()?;
+            let e = self.eval.as_mut().expect("built");
+            let shot = e.view(gpu, &self.model, view, &camera, time, None)?;
+            let Some(im) = shot.images else { continue };
+            let sf = transients::SpawnFrame {
+                camera: &camera,
+                time,
+                render: &im.render,
+                gt: &gt,
+            };
+            let left = room - all.len();
+            let sh = self.model.gaussians.layout.sh_coeffs;
+            let (t, picked, over) =
+                transients::transients_of(&sf, &tc, &self.bounds, spacing, sh, left);
+            report
+                .frames
+                .push((self.frames[i].id.clone(), self.frame_psnr[i], picked));
+            report.over_budget += over;
+            all.append(&t);
+        }
+        report.spawned = all.len();
+        let first = self.model.gaussians.n;
+        self.model.gaussians.append_transients(self.gpu, &all)?;
+        if let Some(s) = self.passes.as_ref() {
+            s.densify.clear_stats(self.gpu, first, all.len() as u32)?;
+        }
+        self.last_spawn = Some((self.iteration, report));
         Ok(())
     }
 

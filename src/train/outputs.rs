@@ -56,6 +56,9 @@ pub struct LogLine {
     pub motion_p50_px: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion_p99_px: Option<f64>,
+    /// Transient Gaussians among `num_gaussians` (with transients on).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transients: Option<u32>,
     /// The collapse guard's probe views (fixed training frames): their mean latest PSNR and
     /// their mean fall below their own best (dB).
     #[serde(default, skip_serializing_if = "Option::is_none")]

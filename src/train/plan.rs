@@ -22,6 +22,8 @@ pub struct FrameTimes {
     time_noise: bool,
     /// 3DGS's camera extent (scales the position learning rate).
     pub extent: f32,
+    /// The median gap between consecutive distinct training times (transients' time unit).
+    pub spacing: f32,
 }
 
 impl FrameTimes {
@@ -33,7 +35,9 @@ impl FrameTimes {
         for (r, &i) in by_time.iter().enumerate() {
             rank[i] = r;
         }
+        let spacing = median_gap(&times);
         FrameTimes {
+            spacing,
             time_noise: match noise {
                 TimeNoise::Auto => !synthetic,
                 TimeNoise::On => true,
@@ -72,6 +76,18 @@ impl FrameTimes {
         };
         self.by_time[j]
     }
+}
+
+/// The median gap between consecutive distinct values of `times` (1 with fewer than two).
+pub fn median_gap(times: &[f32]) -> f32 {
+    let mut t: Vec<f32> = times.iter().copied().filter(|v| v.is_finite()).collect();
+    t.sort_by(f32::total_cmp);
+    t.dedup();
+    let gaps: Vec<f64> = t.windows(2).map(|w| (w[1] - w[0]) as f64).collect();
+    if gaps.is_empty() {
+        return 1.0;
+    }
+    crate::stats::median(gaps) as f32
 }
 
 /// Which render of a DispFlow step plays which part. Decided once from the order.
@@ -124,6 +140,10 @@ pub struct StepLr {
     /// The MLP's rate and its own Adam step (counted from the end of the warm-up); `None`
     /// while the deformation is off.
     pub deform: Option<(f64, u32)>,
+    /// Transients' time centre, log-width and velocity (0 without transients).
+    pub centre: f64,
+    pub log_width: f64,
+    pub velocity: f64,
 }
 
 /// Everything iteration `iteration` (1-based) does.
@@ -152,6 +172,8 @@ pub struct StepPlan {
     pub sparse: bool,
     /// The model is split anew after the step (and after its densification).
     pub classify: bool,
+    /// Transients are spawned after the step (and after its densification).
+    pub spawn: bool,
 }
 
 impl StepPlan {
@@ -206,7 +228,7 @@ impl StepPlan {
             background,
             sh_degree: cfg.sh_degree.min((it - 1) / cfg.sh_interval),
             motion,
-            lr: learning_rates(cfg, frames.extent, it),
+            lr: learning_rates(cfg, frames, it),
             densify_stats: window,
             abs_grad: window && d.grad_stat == GradStat::Abs,
             densify,
@@ -214,6 +236,7 @@ impl StepPlan {
             sparse,
             // Densification renumbers the Gaussians: a split model is probed again at once.
             classify: split_due || (sparse && densify.is_some()),
+            spawn: spawn_due(cfg, it),
         }
     }
 }
@@ -311,7 +334,20 @@ pub fn motion_weight_at(cfg: &TrainConfig, iteration: u32) -> f32 {
     a * (0.1 + 0.9 * f.clamp(0.0, 1.0))
 }
 
-fn learning_rates(cfg: &TrainConfig, extent: f32, it: u32) -> StepLr {
+/// Transients are spawned after 1-based step `it` (every `transient.every` steps inside its
+/// window, counted in fractions of the run).
+pub fn spawn_due(cfg: &TrainConfig, it: u32) -> bool {
+    let t = &cfg.transient;
+    if t.mode != super::config::TransientMode::On {
+        return false;
+    }
+    let n = cfg.iterations as f64;
+    let (lo, hi) = (t.from as f64 * n, t.until as f64 * n);
+    it % t.every.max(1) == 0 && (it as f64) >= lo && (it as f64) <= hi
+}
+
+fn learning_rates(cfg: &TrainConfig, frames: &FrameTimes, it: u32) -> StepLr {
+    let extent = frames.extent;
     let lr = &cfg.lr;
     let (pos_scale, scaling_scale) = lr.spatial(extent);
     let steps = |s: u32| if s > 0 { s } else { cfg.iterations };
@@ -329,8 +365,14 @@ fn learning_rates(cfg: &TrainConfig, extent: f32, it: u32) -> StepLr {
         lr_delay_mult: lr.position_delay_mult,
         max_steps: steps(lr.deform_max_steps),
     };
+    let means = pos.at(it as i64);
+    let tc = &cfg.transient;
+    let floor = (tc.floor_frames * frames.spacing).max(1e-6) as f64;
     StepLr {
-        means: pos.at(it as i64),
+        means,
+        centre: tc.lr_centre,
+        log_width: tc.lr_width,
+        velocity: tc.lr_velocity_mult * means / floor,
         log_scales: lr.scaling * scaling_scale,
         quats: lr.rotation,
         opacity: lr.opacity,

@@ -135,6 +135,8 @@ pub(super) fn train_loop(
     }
     let mut dead_warned = false;
     let mut prune = None;
+    let mut spawn_seen = None;
+    let transients_on = cfg.transient.mode == super::config::TransientMode::On;
     progress.start(cfg.iterations, tr.iteration);
     while tr.iteration < cfg.iterations {
         let next = tr.iteration + 1;
@@ -201,6 +203,12 @@ pub(super) fn train_loop(
             stats.dyn_sum = (stats.dyn_sum.0 + tr.dynamic_fraction(), stats.dyn_sum.1 + 1);
         }
         progress.position(tr.iteration);
+        if tr.last_spawn.as_ref().map(|s| s.0) != spawn_seen {
+            spawn_seen = tr.last_spawn.as_ref().map(|s| s.0);
+            if let Some((it, s)) = &tr.last_spawn {
+                progress.note(&format!("spawned after iteration {it}: {s}"));
+            }
+        }
         if let Some(l) = info {
             let dynamic = tr.dynamic_fraction();
             // Not counted in the training time: the probe is a measurement, not training.
@@ -224,8 +232,13 @@ pub(super) fn train_loop(
             let level = guard.probe_level();
             if message {
                 let worst = worst.take();
+                let transients = if transients_on {
+                    format!(" ({} transient)", tr.model.gaussians.transients)
+                } else {
+                    String::new()
+                };
                 let msg = format!(
-                    "loss {:.4} psnr {:.2} (worst view {}){}{} gaussians {} dynamic {:.0}%",
+                    "loss {:.4} psnr {:.2} (worst view {}){}{} gaussians {}{transients} dynamic {:.0}%",
                     l.loss.loss,
                     l.loss.psnr,
                     worst
@@ -258,6 +271,7 @@ pub(super) fn train_loop(
                 motion_gt_px: probe.and_then(|p| p.gt_px),
                 motion_p50_px: probe.and_then(|p| p.p50_px),
                 motion_p99_px: probe.and_then(|p| p.p99_px),
+                transients: transients_on.then_some(tr.model.gaussians.transients),
                 probe_psnr: level.map(|l| l.0),
                 probe_fall_db: level.map(|l| l.1),
                 worst_psnr: None,

@@ -258,6 +258,11 @@ fn finish(
     };
     let mut metrics = Report::new(cfg, ctx, per);
     metrics.initial_psnr = initial_psnr;
+    if cfg.transient.mode == super::config::TransientMode::On {
+        let g = &tr.model.gaussians;
+        metrics.gaussians_canonical = Some(g.deformed());
+        metrics.gaussians_transient = Some(g.transients);
+    }
     // None when no step ran (a resumed run that had already finished).
     metrics.ms_per_step =
         (!stats.step_ms.is_empty()).then(|| crate::stats::median(stats.step_ms.clone()));
@@ -297,10 +302,18 @@ fn finish(
     Ok(metrics)
 }
 
-/// `point_cloud.ply`, `deform.bin`, `nodes.bin` and `dynamic.bin` (removed when the model has
-/// no split).
+/// `point_cloud.ply`, `transients.ply` (when the model has transients), `deform.bin`,
+/// `nodes.bin` and `dynamic.bin` (removed when the model has no split).
 fn write_model_files(gpu: &Gpu, tr: &mut Trainer<'_>, out: &Path) -> Result<()> {
-    write_ply(&out.join("point_cloud.ply"), &tr.gaussians()?)?;
+    // Canonical Gaussians in the standard layout (what viewers read); transients apart.
+    let (canonical, transients) = tr.gaussians()?.split_transients();
+    write_ply(&out.join("point_cloud.ply"), &canonical)?;
+    let tpath = out.join("transients.ply");
+    if !transients.is_empty() {
+        write_ply(&tpath, &transients)?;
+    } else if tpath.is_file() {
+        std::fs::remove_file(&tpath).map_err(io(&tpath))?;
+    }
     let mlp = tr.model.deform.download(gpu)?;
     write_atomic(&out.join("deform.bin"), bytemuck::cast_slice(&mlp))?;
     if let Some(ns) = tr.model.nodes.as_ref().filter(|n| n.placed()) {

@@ -39,9 +39,7 @@ impl StepPasses {
     /// What the photometric render draws: the Gaussians at t1, blending the motion channels
     /// when this step's motion term splats them there.
     fn photo<'a>(&'a self, model: &'a Model, p: &StepPlan) -> SplatInputs<'a> {
-        let g = model
-            .gaussians
-            .splats(self.deform.drawn(Slot::T1), p.sh_degree);
+        let g = self.deform.splats(model, Slot::T1, p.sh_degree);
         match self.motion_of(p) {
             Some(m) => m.photo_inputs(g),
             None => g,
@@ -80,12 +78,12 @@ pub fn record_step(
     };
     rec.set_zone("deform");
     s.deform
-        .forward(rec, model, Slot::T1, p.deform_active.then_some(p.t1));
+        .forward(rec, model, Slot::T1, p.t1, p.deform_active);
     if let (Some(mp), Some(m)) = (p.motion, s.motion_of(p)) {
         s.deform.mlp_forward(rec, model, Slot::T2, mp.t2);
-        m.displacement(rec, &s.deform, g.n);
+        m.displacement(rec, &s.deform, model, (p.t1, mp.t2));
         if m.draws_t2() {
-            s.deform.apply(rec, model, Slot::T2, true);
+            s.deform.apply(rec, model, Slot::T2, mp.t2, true);
         }
     }
     // The intermediate render first: Gaussian flow's channels need its projection at t2
@@ -125,11 +123,14 @@ pub fn record_step(
         Slot::T1,
         &s.render.drawn_grads(),
         p.deform_active,
+        p.t1,
+        s.render.bufs.d_op_scale.all(),
     );
     s.render.copy_appearance_grads(rec, g);
     if let Some(m) = s.motion_of(p) {
         m.second_render_grads(rec, model, &s.deform);
-        m.displacement_backward(rec, &s.deform, &s.render, g.n);
+        let t2 = p.motion.map_or(p.t1, |mp| mp.t2);
+        m.displacement_backward(rec, &s.deform, &s.render, model, (p.t1, t2));
     }
     if p.deform_active {
         rec.set_zone("mlp bwd");

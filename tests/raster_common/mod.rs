@@ -144,6 +144,7 @@ impl Uploaded {
             sh_coeffs: self.sh_coeffs,
             sh_degree: self.sh_degree,
             features: (self.feature_dims > 0).then(|| (self.features.all(), self.feature_dims)),
+            opacity_scale: None,
         }
     }
 }

@@ -30,7 +30,10 @@ mod blend;
 mod project;
 
 pub use blend::{blend_bwd, blend_bwd_f64, blend_fwd, blend_fwd_f64, BlendOut64};
-pub use project::{project, project_bwd, project_bwd_f64, project_f64, quat_to_rot};
+pub use project::{
+    project, project_bwd, project_bwd_f64, project_f64, project_scaled_bwd_f64, project_scaled_f64,
+    quat_to_rot,
+};
 
 /// Tile edge in pixels.
 pub const TILE: u32 = 16;

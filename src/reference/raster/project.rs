@@ -478,3 +478,46 @@ fn project_bwd_impl(
     }
     out
 }
+
+/// Twin of the projection with opacity factors (`ProjectParams::opacity_scale`): [`project_f64`]
+/// with each opacity multiplied by `w[i]`, and a Gaussian whose factor is not > 0 culled
+/// (the transients' temporal weights).
+pub fn project_scaled_f64(cam: &Camera, g: &Gaussians64, w: &[f64]) -> Projected64 {
+    assert_eq!(w.len(), g.len(), "project_scaled: one factor per Gaussian");
+    let mut p = project_f64(cam, g);
+    for (i, &wi) in w.iter().enumerate() {
+        if wi > 0.0 {
+            p.opacity[i] *= wi;
+        } else {
+            p.mean2d[i] = [0.0; 2];
+            p.conic[i] = [0.0; 3];
+            p.depth[i] = 0.0;
+            p.radius[i] = 0;
+            p.tile_rect[i] = [0; 4];
+            p.color[i] = [0.0; 3];
+            p.opacity[i] = 0.0;
+        }
+    }
+    p
+}
+
+/// Reverse of [`project_scaled_f64`]: [`project_bwd_f64`] with the logits' gradient scaled by
+/// the factor, and ∂L/∂w = ∂L/∂opacity · σ(logit) (0 where culled).
+pub fn project_scaled_bwd_f64(
+    cam: &Camera,
+    g: &Gaussians64,
+    w: &[f64],
+    d: &BlendGrads,
+) -> (ProjectGrads, Vec<f64>) {
+    let culled = |i: usize| w[i].is_nan() || w[i] <= 0.0;
+    let mut pg = project_bwd_impl(cam, g, culled, d);
+    let mut dw = vec![0.0; g.len()];
+    for i in 0..g.len() {
+        if culled(i) {
+            continue;
+        }
+        pg.opacity_logits[i] *= w[i];
+        dw[i] = d.opacity[i] * super::sigmoid(g.opacity_logits[i]);
+    }
+    (pg, dw)
+}

@@ -7,6 +7,11 @@
 //! deformation in between (so the composition, δ and everything downstream are unchanged,
 //! and a static Gaussian's δ is exactly 0), and the backward gathers
 //! the output gradients of the same rows. The dense path is the code that ran before.
+//!
+//! The model's transient Gaussians (its last rows, `model.gaussians.transients`) are not
+//! deformed: the MLP, the nodes and the composition run over the canonical rows only, and the
+//! temporal stage (`kernels::temporal`) draws the transient rows at the slot's time and writes
+//! every row's opacity factor (1 for canonical rows), which the slot's splats carry.
 
 use std::cell::Cell;
 
@@ -15,7 +20,9 @@ use crate::error::Result;
 use crate::kernels::deform::{DeformApply, Drawn};
 use crate::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
 use crate::kernels::nodes::{BlendInputs, NodeBuffers, NodeKernels};
+use crate::kernels::raster::SplatInputs;
 use crate::kernels::sparse::SparseKernels;
+use crate::kernels::temporal::{Temporal, TemporalGrads, TemporalInputs, TemporalParams};
 use crate::model::deform::MlpConfig;
 use crate::model::gaussians::Section;
 use crate::model::nodes::{FieldConfig, NodeState};
@@ -43,6 +50,8 @@ struct SlotBuffers {
     /// The MLP's output at the control nodes [M,10] and its gradient (nodes field).
     node_out: Option<Buffer>,
     node_d_out: Option<Buffer>,
+    /// Every row's opacity factor at the slot's time [N] (transients' temporal weights).
+    op_scale: Buffer,
 }
 
 /// The control-node field's kernels and the backward's scratch.
@@ -56,6 +65,7 @@ struct NodeField {
 pub struct DeformPass {
     mlp: Mlp,
     apply: DeformApply,
+    temporal: Temporal,
     rows: SparseKernels,
     /// The dynamic Gaussians' canonical means, gathered (split model).
     compact_means: Buffer,
@@ -104,12 +114,14 @@ impl DeformPass {
                         .filter(|_| backward)
                         .map(|_| node_rows("node transform grads"))
                         .transpose()?,
+                    op_scale: rows("opacity factors", 1)?,
                 })
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(DeformPass {
             mlp,
             apply: DeformApply::new(gpu)?,
+            temporal: Temporal::new(gpu)?,
             rows: SparseKernels::new(gpu)?,
             compact_means: gpu.buffer("dynamic means", cap * row::VEC3 * 4)?,
             slots,
@@ -145,12 +157,13 @@ impl DeformPass {
             return;
         };
         let (g, d) = (&model.gaussians, &model.dynamic);
-        if ns.knn_for.get() == Some((g.n, d.generation())) {
+        let n = g.deformed();
+        if ns.knn_for.get() == Some((n, d.generation())) {
             return;
         }
         let means = g.param(Section::Means);
         let row_of = d.split().map(|_| d.row_of());
-        let (n, m, k) = (g.n, ns.m, ns.cfg.knn);
+        let (m, k) = (ns.m, ns.cfg.knn);
         let nodes = ns.param_block();
         (f.kernels).record_knn(rec, ns.knn_rows(n), n, m, k, means, nodes, row_of);
         ns.knn_updated(n, d.generation());
@@ -163,7 +176,7 @@ impl DeformPass {
             return;
         }
         f.pairs_for.set(epoch);
-        let n = model.gaussians.n;
+        let n = model.gaussians.deformed();
         (f.kernels).record_pairs(rec, &f.bufs, ns.knn_rows(n), n, ns.m);
     }
 
@@ -172,7 +185,7 @@ impl DeformPass {
         BlendInputs {
             m: ns.m,
             k: ns.cfg.knn,
-            knn: ns.knn_rows(g.n),
+            knn: ns.knn_rows(g.deformed()),
             means: g.param(Section::Means),
             quats: g.param(Section::Quats),
             nodes: ns.param_block(),
@@ -186,8 +199,9 @@ impl DeformPass {
     fn nodes_forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32) {
         let (f, ns) = self.node_field(model).expect("nodes field");
         let (g, s, dynamic) = (&model.gaussians, self.slot(k), &model.dynamic);
+        let n = g.deformed();
         if !ns.placed() {
-            rec.fill(s.out.slice(0, g.n as u64 * row::DEFORM * 4), 0);
+            rec.fill(s.out.slice(0, n.max(1) as u64 * row::DEFORM * 4), 0);
             return;
         }
         self.ensure_knn(rec, model);
@@ -197,7 +211,7 @@ impl DeformPass {
         self.mlp
             .forward(rec, &s.mlp, ns.m, ns.positions(), time, params, x.node_out);
         let Some(count) = dynamic.split() else {
-            (f.kernels).record_lbs(rec, g.n, &x, None, s.out.all());
+            (f.kernels).record_lbs(rec, n, &x, None, s.out.all());
             return;
         };
         if count > 0 {
@@ -207,7 +221,7 @@ impl DeformPass {
         let (row_of, out, fixed) = (dynamic.row_of(), s.compact_out.all(), dynamic.fixed());
         let width = row::DEFORM as u32;
         self.rows
-            .expand(rec, g.n, width, row_of, out, fixed, s.out.all());
+            .expand(rec, n, width, row_of, out, fixed, s.out.all());
     }
 
     /// Backward of [`Self::nodes_forward`] from slot `k`'s output gradient: the blend's
@@ -233,7 +247,7 @@ impl DeformPass {
             return;
         }
         let (rows, d_out, idx) = match dynamic.split() {
-            None => (g.n, self.output_grad(k), None),
+            None => (g.deformed(), self.output_grad(k), None),
             Some(count) => {
                 let c = s.compact_d_out.as_ref().expect("a backward pass").all();
                 let width = row::DEFORM as u32;
@@ -283,8 +297,9 @@ impl DeformPass {
         let params = model.deform.params.all();
         let Some(count) = dynamic.split() else {
             let time = MlpTime::Batch(t);
+            let n = g.deformed();
             self.mlp
-                .forward(rec, &s.mlp, g.n, means, time, params, s.out.all());
+                .forward(rec, &s.mlp, n, means, time, params, s.out.all());
             return;
         };
         if count > 0 {
@@ -297,27 +312,114 @@ impl DeformPass {
         let (row_of, out, fixed) = (dynamic.row_of(), s.compact_out.all(), dynamic.fixed());
         let width = row::DEFORM as u32;
         self.rows
-            .expand(rec, g.n, width, row_of, out, fixed, s.out.all());
+            .expand(rec, g.deformed(), width, row_of, out, fixed, s.out.all());
     }
 
-    /// Composes the canonical Gaussians with slot `k`'s MLP output (`deformed`) or with D ≡ 0.
-    pub fn apply(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, deformed: bool) {
+    /// The temporal stage's settings at time `t` (δ from `t` to `t2`).
+    fn temporal_params(model: &Model, t: f32, t2: f32) -> TemporalParams {
+        let (g, tr) = (&model.gaussians, model.transient);
+        TemporalParams {
+            n: g.n,
+            first: g.deformed(),
+            t,
+            log_floor: tr.log_floor,
+            cutoff: tr.cutoff,
+            t2,
+            t_lo: tr.t_range[0],
+            t_hi: tr.t_range[1],
+        }
+    }
+
+    fn temporal_inputs(model: &Model) -> TemporalInputs<'_> {
+        let g = &model.gaussians;
+        TemporalInputs {
+            means: g.param(Section::Means),
+            log_scales: g.param(Section::LogScales),
+            quats: g.param(Section::Quats),
+            centre: g.param(Section::TimeCentre),
+            log_width: g.param(Section::TimeLogWidth),
+            velocity: g.param(Section::Velocity),
+        }
+    }
+
+    /// Composes the canonical Gaussians with slot `k`'s MLP output (`deformed`) or with D ≡ 0,
+    /// and draws the transients at time `t`.
+    pub fn apply(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32, deformed: bool) {
         let (g, s) = (&model.gaussians, self.slot(k));
         let d = deformed.then(|| s.out.all());
-        self.apply
-            .forward(rec, g.n, &g.canonical(), d, &drawn_of(&s.drawn));
+        let drawn = drawn_of(&s.drawn);
+        if g.deformed() > 0 {
+            self.apply
+                .forward(rec, g.deformed(), &g.canonical(), d, &drawn);
+        }
+        if g.transients > 0 {
+            let p = Self::temporal_params(model, t, t);
+            let x = Self::temporal_inputs(model);
+            self.temporal.forward(rec, &p, &x, &drawn, s.op_scale.all());
+        }
     }
 
-    /// D at `t` (`None`: D ≡ 0, the warm-up) applied into slot `k`.
-    pub fn forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: Option<f32>) {
-        if let Some(t) = t {
+    /// The model at time `t` into slot `k`: D(·, t) when `deformed` (else D ≡ 0, the
+    /// warm-up) and the transients at `t`.
+    pub fn forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32, deformed: bool) {
+        if deformed && model.gaussians.deformed() > 0 {
             self.mlp_forward(rec, model, k, t);
         }
-        self.apply(rec, model, k, t.is_some());
+        self.apply(rec, model, k, t, deformed);
+    }
+
+    /// What the rasteriser draws of slot `k`: its geometry, the model's opacity and SH, and the
+    /// opacity factors when the model has transients.
+    pub fn splats<'a>(&'a self, model: &'a Model, k: Slot, sh_degree: u32) -> SplatInputs<'a> {
+        let g = &model.gaussians;
+        SplatInputs {
+            opacity_scale: (g.transients > 0).then(|| self.slot(k).op_scale.all()),
+            ..g.splats(self.drawn(k), sh_degree)
+        }
+    }
+
+    /// The opacity factors of slot `k` [N] (meaningful only with transients).
+    pub fn opacity_scale(&self, k: Slot) -> BufSlice<'_> {
+        self.slot(k).op_scale.all()
+    }
+
+    /// DispFlow's δ of the transient rows, v·(t2 − t1), over the deformation's rows of `delta`.
+    pub fn transient_displacement(
+        &self,
+        rec: &mut Recorder<'_>,
+        model: &Model,
+        (t1, t2): (f32, f32),
+        delta: BufSlice<'_>,
+    ) {
+        if model.gaussians.transients == 0 {
+            return;
+        }
+        let p = Self::temporal_params(model, t1, t2);
+        let v = model.gaussians.param(Section::Velocity);
+        self.temporal.displacement(rec, &p, v, delta);
+    }
+
+    /// ∂L/∂δ of the transient rows into their velocity gradient (after [`Self::backward`]).
+    pub fn transient_displacement_backward(
+        &self,
+        rec: &mut Recorder<'_>,
+        model: &Model,
+        (t1, t2): (f32, f32),
+        d_delta: BufSlice<'_>,
+    ) {
+        if model.gaussians.transients == 0 {
+            return;
+        }
+        let p = Self::temporal_params(model, t1, t2);
+        let gv = model.gaussians.grad(Section::Velocity);
+        self.temporal.displacement_backward(rec, &p, d_delta, gv);
     }
 
     /// Gradients wrt slot `k`'s drawn geometry → the canonical means/log-scales/quaternion
-    /// gradients and, when `deformed`, ∂L/∂(dx, dr, ds) of the slot.
+    /// gradients and, when `deformed`, ∂L/∂(dx, dr, ds) of the slot; the transient rows'
+    /// gradients (with c, τ, v) from the drawn geometry's and the opacity factors'
+    /// (`d_op_scale`) at time `t`.
+    #[allow(clippy::too_many_arguments)] // the slot's time and the factor's gradient
     pub fn backward(
         &self,
         rec: &mut Recorder<'_>,
@@ -325,12 +427,30 @@ impl DeformPass {
         k: Slot,
         d_drawn: &Drawn<'_>,
         deformed: bool,
+        t: f32,
+        d_op_scale: BufSlice<'_>,
     ) {
         let g = &model.gaussians;
         let d_out = deformed.then(|| self.output_grad(k));
         let grads = g.canonical_grads();
-        self.apply
-            .backward(rec, g.n, &g.canonical(), d_drawn, &grads, d_out);
+        if g.deformed() > 0 {
+            self.apply
+                .backward(rec, g.deformed(), &g.canonical(), d_drawn, &grads, d_out);
+        }
+        if g.transients > 0 {
+            let p = Self::temporal_params(model, t, t);
+            let x = Self::temporal_inputs(model);
+            let tg = TemporalGrads {
+                means: grads.means,
+                log_scales: grads.log_scales,
+                quats: grads.quats,
+                centre: g.grad(Section::TimeCentre),
+                log_width: g.grad(Section::TimeLogWidth),
+                velocity: g.grad(Section::Velocity),
+            };
+            self.temporal
+                .backward(rec, &p, &x, d_drawn, d_op_scale, &tg);
+        }
     }
 
     /// [`DeformPass::backward`] of a second render of the step (deformed): its drawn-geometry
@@ -345,8 +465,11 @@ impl DeformPass {
         let g = &model.gaussians;
         let grads = g.canonical_grads();
         let d_out = self.output_grad(k);
-        self.apply
-            .backward_add(rec, g.n, &g.canonical(), d_drawn, &grads, d_out);
+        // Transients learn from the photometric render only (their rows are left alone).
+        if g.deformed() > 0 {
+            self.apply
+                .backward_add(rec, g.deformed(), &g.canonical(), d_drawn, &grads, d_out);
+        }
     }
 
     /// Zeroes slot `k`'s output gradient (before only [`DeformPass::backward_add`] writes it).
@@ -363,7 +486,14 @@ impl DeformPass {
         let (d, s, dynamic) = (&model.deform, self.slot(k), &model.dynamic);
         let (params, grads) = (d.params.all(), d.grads.all());
         let (rows, d_out) = match dynamic.split() {
-            None => (model.gaussians.n, self.output_grad(k)),
+            None if model.gaussians.deformed() == 0 => {
+                // Transients only: the MLP had no input, its gradient is zero.
+                if !accumulate {
+                    rec.fill(grads, 0);
+                }
+                return;
+            }
+            None => (model.gaussians.deformed(), self.output_grad(k)),
             Some(0) => {
                 // Nothing is dynamic: the MLP had no input, its gradient is zero.
                 if !accumulate {

@@ -301,10 +301,19 @@ impl MotionTerm {
     }
 
     /// δ = dx(t2) − dx(t1) from the deformation pass's two slots (displacement flow only).
-    pub fn displacement(&self, rec: &mut Recorder<'_>, d: &DeformPass, n: u32) {
+    pub fn displacement(
+        &self,
+        rec: &mut Recorder<'_>,
+        d: &DeformPass,
+        model: &Model,
+        (t1, t2): (f32, f32),
+    ) {
         if let Rep::Displacement { delta, .. } = &self.rep {
-            let (t1, t2) = (d.output(Slot::T1), d.output(Slot::T2));
-            self.dispflow.displacement(rec, n, t1, t2, delta.all());
+            let n = model.gaussians.n;
+            let (o1, o2) = (d.output(Slot::T1), d.output(Slot::T2));
+            self.dispflow.displacement(rec, n, o1, o2, delta.all());
+            // A transient moves by v·(t2 − t1): its rows replace the deformation's.
+            d.transient_displacement(rec, model, (t1, t2), delta.all());
         }
     }
 
@@ -332,7 +341,7 @@ impl MotionTerm {
         } else {
             Slot::T1
         };
-        let g = model.gaussians.splats(d.drawn(slot), sh);
+        let g = d.splats(model, slot, sh);
         self.splat_on(g, !self.roles.photo_splats)
     }
 
@@ -559,7 +568,8 @@ impl MotionTerm {
         rec: &mut Recorder<'_>,
         d: &DeformPass,
         photo: &RenderPass,
-        n: u32,
+        model: &Model,
+        times: (f32, f32),
     ) {
         if let Rep::Gaussian { .. } = self.rep {
             return;
@@ -569,8 +579,10 @@ impl MotionTerm {
             _ => photo,
         };
         let (d1, d2) = (d.output_grad(Slot::T1), d.output_grad(Slot::T2));
+        let n = model.gaussians.n;
         self.dispflow
             .displacement_bwd(rec, n, splatting.feature_grads(), d1, d2);
+        d.transient_displacement_backward(rec, model, times, splatting.feature_grads());
     }
 
     /// The scene-motion source's name (for logs).

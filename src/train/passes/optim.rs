@@ -6,9 +6,10 @@ use super::render::RenderPass;
 use crate::error::Result;
 use crate::kernels::adam::{Adam, AdamBuffers, AdamGroup};
 use crate::kernels::densify::{Densifier, DensifyBuffers, DensifySettings, GaussianBuffers};
+use crate::kernels::temporal::{Temporal, TemporalParams};
 use crate::model::gaussians::Section;
 use crate::model::optim::AdamHyper;
-use crate::model::state::{GaussianState, Model};
+use crate::model::state::{GaussianState, Model, TransientShape};
 use crate::train::config::DensifyConfig;
 use crate::train::plan::StepLr;
 use crate::vk::{BufSlice, Gpu, Recorder};
@@ -51,6 +52,22 @@ impl AdamPass {
         ];
         if l.sh_coeffs > 1 {
             groups.push(group(Section::ShRest, lr.sh_rest));
+        }
+        if g.transients > 0 {
+            // The temporal sections learn on the transient rows only.
+            let first = g.deformed();
+            for (s, rate) in [
+                (Section::TimeCentre, lr.centre),
+                (Section::TimeLogWidth, lr.log_width),
+                (Section::Velocity, lr.velocity),
+            ] {
+                groups.push(AdamGroup {
+                    first: (l.offset(s) + first as u64 * l.row_len(s) as u64) as u32,
+                    count: g.transients * l.row_len(s),
+                    lr: rate as f32,
+                    mask: None,
+                });
+            }
         }
         groups.retain(|g| g.count > 0);
         let bufs = AdamBuffers {
@@ -105,13 +122,19 @@ impl AdamPass {
     }
 }
 
-/// 3DGS density control over the model's Gaussians.
+/// 3DGS density control over the model's Gaussians. Transients are densified with the
+/// canonical rows by the same rules (their rows stay after the canonical ones: densification
+/// writes rows in their originals' order), pruned by their largest opacity over the sequence,
+/// and left alone by the opacity reset.
 pub struct DensifyPass {
     densifier: Densifier,
     pub bufs: DensifyBuffers,
     cfg: DensifyConfig,
     extent: f32,
     seed: u32,
+    temporal: Temporal,
+    /// The prune's logits [budget] when the model has transients.
+    peak: crate::vk::Buffer,
 }
 
 impl DensifyPass {
@@ -123,6 +146,8 @@ impl DensifyPass {
             cfg,
             extent,
             seed: seed as u32,
+            temporal: Temporal::new(gpu)?,
+            peak: gpu.buffer("densify prune logits", cfg.budget.max(1) as u64 * 4)?,
         })
     }
 
@@ -147,6 +172,7 @@ impl DensifyPass {
         &self,
         gpu: &Gpu,
         g: &mut GaussianState,
+        transient: TransientShape,
         it: u32,
         screen_cut: bool,
     ) -> Result<()> {
@@ -176,15 +202,55 @@ impl DensifyPass {
             m: &g.next[1],
             v: &g.next[2],
         };
+        let first = g.deformed();
+        let prune = (g.transients > 0).then(|| {
+            let p = TemporalParams {
+                n: g.n,
+                first,
+                log_floor: transient.log_floor,
+                cutoff: transient.cutoff,
+                t_lo: transient.t_range[0],
+                t_hi: transient.t_range[1],
+                ..Default::default()
+            };
+            let out = self.peak.slice(0, g.n.max(1) as u64 * 4);
+            let (l, c, w) = (
+                g.param(Section::Opacity),
+                g.param(Section::TimeCentre),
+                g.param(Section::TimeLogWidth),
+            );
+            self.temporal.peak(&mut rec, &p, l, c, w, out);
+            out
+        });
         self.densifier
-            .record_densify(&mut rec, &self.bufs, src, dst, g.n, &s)?;
+            .record_densify_pruning(&mut rec, &self.bufs, src, dst, g.n, &s, prune)?;
         rec.finish()?;
         let n = self.bufs.read_count(gpu)?;
-        g.swap_generation(n);
+        let canonical = self.bufs.read_rows_before(gpu, first, g.n)?;
+        g.swap_generation(n, n - canonical);
         Ok(())
     }
 
-    /// 3DGS's periodic opacity reset (moments of the opacity section cleared).
+    /// Zeroes the statistics of rows `first..first + count` (new transients).
+    pub fn clear_stats(&self, gpu: &Gpu, first: u32, count: u32) -> Result<()> {
+        if count == 0 {
+            return Ok(());
+        }
+        let mut rec = Recorder::new(gpu)?;
+        for b in [
+            &self.bufs.grad_accum,
+            &self.bufs.denom,
+            &self.bufs.max_radii,
+        ] {
+            rec.fill(b.elems::<f32>(first as u64, count as u64), 0);
+        }
+        rec.finish()?;
+        Ok(())
+    }
+
+    /// 3DGS's periodic opacity reset (moments of the opacity section cleared), over the
+    /// canonical rows: a young transient would not survive it (its life is a few frames, its
+    /// opacity would not climb back before the next densification prunes it).
     pub fn reset_opacity(&self, gpu: &Gpu, g: &GaussianState) -> Result<()> {
         let mut rec = Recorder::new(gpu)?;
         let b = GaussianBuffers {
@@ -193,7 +259,8 @@ impl DensifyPass {
             m: &g.m,
             v: &g.v,
         };
-        self.densifier.record_opacity_reset(&mut rec, b, g.n);
+        self.densifier
+            .record_opacity_reset(&mut rec, b, g.deformed());
         rec.finish()?;
         Ok(())
     }

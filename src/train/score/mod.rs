@@ -260,9 +260,9 @@ impl Evaluator {
         let mut rec = Recorder::new(gpu)?;
         let active = view.deform_active;
         self.deform
-            .forward(&mut rec, model, Slot::T1, active.then_some(f.time));
+            .forward(&mut rec, model, Slot::T1, f.time, active);
         self.deform
-            .forward(&mut rec, model, Slot::T2, active.then_some(*t_next));
+            .forward(&mut rec, model, Slot::T2, *t_next, active);
         rec.finish()?;
         let a: Vec<[f32; 3]> = gpu.read(self.deform.drawn(Slot::T1)[0])?;
         let b: Vec<[f32; 3]> = gpu.read(self.deform.drawn(Slot::T2)[0])?;
@@ -303,11 +303,9 @@ impl Evaluator {
         };
         loop {
             let mut rec = Recorder::new(gpu)?;
-            let time = view.deform_active.then_some(t);
-            self.deform.forward(&mut rec, model, Slot::T1, time);
-            let mut splats = model
-                .gaussians
-                .splats(self.deform.drawn(Slot::T1), view.sh_degree);
+            self.deform
+                .forward(&mut rec, model, Slot::T1, t, view.deform_active);
+            let mut splats = self.deform.splats(model, Slot::T1, view.sh_degree);
             splats.features = Some((self.delta.all(), 3));
             self.render.forward(&mut rec, camera, &splats, &opts);
             self.watch.record(&mut rec, 0, &self.render);
@@ -338,8 +336,8 @@ impl Evaluator {
         t: f32,
     ) -> Result<HostGaussians> {
         let mut rec = Recorder::new(gpu)?;
-        let time = view.deform_active.then_some(t);
-        self.deform.forward(&mut rec, model, Slot::T1, time);
+        self.deform
+            .forward(&mut rec, model, Slot::T1, t, view.deform_active);
         rec.finish()?;
         let mut g = model.gaussians.download(gpu)?;
         let n = model.gaussians.n as usize;
@@ -363,6 +361,33 @@ impl Evaluator {
                 }
             })
             .collect();
+        if model.gaussians.transients > 0 {
+            // Transients as they are at `t`: opacity times the temporal weight, culled ones
+            // dropped (a standard model of that instant has no time).
+            let w: Vec<f32> = gpu.read(self.deform.opacity_scale(Slot::T1))?;
+            let keep: Vec<usize> = (0..n).filter(|&i| w[i] > 0.0).collect();
+            let r = 3 * (g.sh_coeffs as usize - 1);
+            let sig = |l: f32| 1.0 / (1.0 + (-l).exp());
+            g = HostGaussians {
+                sh_coeffs: g.sh_coeffs,
+                means: keep.iter().map(|&i| g.means[i]).collect(),
+                log_scales: keep.iter().map(|&i| g.log_scales[i]).collect(),
+                quats: keep.iter().map(|&i| g.quats[i]).collect(),
+                opacity: keep
+                    .iter()
+                    .map(|&i| {
+                        let p = (sig(g.opacity[i]) * w[i]).clamp(1e-7, 1.0 - 1e-7);
+                        (p / (1.0 - p)).ln()
+                    })
+                    .collect(),
+                sh_dc: keep.iter().map(|&i| g.sh_dc[i]).collect(),
+                sh_rest: keep
+                    .iter()
+                    .flat_map(|&i| g.sh_rest[i * r..(i + 1) * r].to_vec())
+                    .collect(),
+                ..Default::default()
+            };
+        }
         Ok(g)
     }
 
@@ -406,9 +431,8 @@ impl Evaluator {
             abs_grad: false,
         };
         let active = view.deform_active;
-        self.deform
-            .forward(rec, model, Slot::T1, active.then_some(t));
-        let mut splats = g.splats(self.deform.drawn(Slot::T1), view.sh_degree);
+        self.deform.forward(rec, model, Slot::T1, t, active);
+        let mut splats = self.deform.splats(model, Slot::T1, view.sh_degree);
         if let Some(tp) = prev {
             if active {
                 self.deform.mlp_forward(rec, model, Slot::T2, tp);
@@ -418,7 +442,10 @@ impl Evaluator {
                 // No deformation yet: D ≡ 0 at every time, δ = 0.
                 rec.fill(self.delta.all(), 0);
             }
-            self.deform.apply(rec, model, Slot::T2, active);
+            // Transients move by v·(t − t_prev) whatever the deformation does.
+            self.deform
+                .transient_displacement(rec, model, (tp, t), self.delta.all());
+            self.deform.apply(rec, model, Slot::T2, tp, active);
             splats.features = Some((self.delta.all(), 3));
         }
         self.render.forward(rec, cam, &splats, &opts);
@@ -446,7 +473,7 @@ impl Evaluator {
             return;
         };
         // The frozen render: the same view with the deformation of t−1.
-        let frozen = g.splats(self.deform.drawn(Slot::T2), view.sh_degree);
+        let frozen = self.deform.splats(model, Slot::T2, view.sh_degree);
         self.render.forward(rec, cam, &frozen, &opts);
         self.watch.record(rec, 1, &self.render);
         self.metrics.record_drc(

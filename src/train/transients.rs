@@ -1,0 +1,266 @@
+//! Spawning transient Gaussians from the residual (issue 37). Pure host code over images the
+//! trainer hands in: which training frames to look at (the lowest PSNR at their last step),
+//! which of their pixels are wrong enough (the largest errors, one per cell of a grid so they
+//! spread over the wrong region), and the Gaussians that back-project them: at `depths` depths
+//! along each pixel's ray inside the scene's bounds (the missing object's depth is unknown; a
+//! wrong-depth transient fits one view, not the several cameras of its lifetime, and is
+//! pruned), centred at the frame's time with σ = `init_frames` frame spacings, no velocity.
+
+use crate::data::Bounds;
+use crate::kernels::raster::Camera;
+use crate::model::gaussians::{inverse_sigmoid, rgb_to_sh_dc, HostGaussians};
+use crate::train::config::TransientConfig;
+
+/// What one spawn did (logged).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SpawnReport {
+    /// Frames looked at: (id, PSNR at its last step, pixels taken).
+    pub frames: Vec<(String, f32, usize)>,
+    /// Transients added.
+    pub spawned: usize,
+    /// Pixels over the error threshold that the budget left out.
+    pub over_budget: usize,
+}
+
+impl std::fmt::Display for SpawnReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let frames: Vec<String> = self
+            .frames
+            .iter()
+            .map(|(id, p, k)| format!("{id} ({p:.1} dB, {k} px)"))
+            .collect();
+        write!(
+            f,
+            "{} transients from {}",
+            self.spawned,
+            if frames.is_empty() {
+                "no frame".to_string()
+            } else {
+                frames.join(", ")
+            }
+        )?;
+        if self.over_budget > 0 {
+            write!(f, "; {} pixels left out by the budget", self.over_budget)?;
+        }
+        Ok(())
+    }
+}
+
+/// The `k` frames with the lowest known PSNR (NaN = not trained yet: skipped), worst first.
+pub fn worst_frames(psnr: &[f32], k: usize) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..psnr.len()).filter(|&i| !psnr[i].is_nan()).collect();
+    idx.sort_by(|&a, &b| psnr[a].total_cmp(&psnr[b]).then(a.cmp(&b)));
+    idx.truncate(k);
+    idx
+}
+
+/// Pixels whose mean absolute RGB error is at least `min_error`, at most one per `cell`×`cell`
+/// block (its worst), the `k` worst of those; and the side of the cells. `render`, `gt`:
+/// [H·W] RGBA.
+pub fn worst_pixels(
+    render: &[[f32; 4]],
+    gt: &[[f32; 4]],
+    width: u32,
+    height: u32,
+    min_error: f32,
+    k: usize,
+) -> (Vec<(u32, u32, f32)>, u32) {
+    let err: Vec<f32> = render
+        .iter()
+        .zip(gt)
+        .map(|(r, g)| ((r[0] - g[0]).abs() + (r[1] - g[1]).abs() + (r[2] - g[2]).abs()) / 3.0)
+        .collect();
+    let over = err.iter().filter(|&&e| e >= min_error).count();
+    if over == 0 || k == 0 {
+        return (Vec::new(), 1);
+    }
+    // Cells sized so the region holds about k of them: the picks spread over all of it.
+    let cell = ((over as f64 / k as f64).sqrt().ceil() as u32).max(1);
+    let (cw, ch) = (width.div_ceil(cell), height.div_ceil(cell));
+    let mut best: Vec<Option<(u32, u32, f32)>> = vec![None; (cw * ch) as usize];
+    for y in 0..height {
+        for x in 0..width {
+            let e = err[(y * width + x) as usize];
+            if e.is_nan() || e < min_error {
+                continue;
+            }
+            let c = &mut best[((y / cell) * cw + x / cell) as usize];
+            if c.map_or(true, |b| e > b.2) {
+                *c = Some((x, y, e));
+            }
+        }
+    }
+    let mut picks: Vec<(u32, u32, f32)> = best.into_iter().flatten().collect();
+    picks.sort_by(|a, b| b.2.total_cmp(&a.2).then((a.1, a.0).cmp(&(b.1, b.0))));
+    picks.truncate(k);
+    (picks, cell)
+}
+
+/// The ray through pixel centre `(x + 0.5, y + 0.5)`: origin (the camera centre) and direction
+/// scaled so that the parameter is the camera depth z.
+pub fn pixel_ray(cam: &Camera, x: u32, y: u32) -> ([f32; 3], [f32; 3]) {
+    let c = cam.centre();
+    let d_cam = [
+        (x as f32 + 0.5 - cam.cx) / cam.fx,
+        (y as f32 + 0.5 - cam.cy) / cam.fy,
+        1.0,
+    ];
+    // Rows of `rot` are the camera axes in world coordinates: d = rotᵀ·d_cam.
+    let d = std::array::from_fn(|a| (0..3).map(|r| cam.rot[r][a] * d_cam[r]).sum());
+    ([c[0] as f32, c[1] as f32, c[2] as f32], d)
+}
+
+/// The depths along ray `(o, d)` inside `b` (slab test), from at least `near`: `(z0, z1)`.
+pub fn ray_box(o: [f32; 3], d: [f32; 3], b: &Bounds, near: f32) -> Option<(f32, f32)> {
+    let (mut lo, mut hi) = (near, f32::INFINITY);
+    let (bmin, bmax) = (b.min.to_array(), b.max.to_array());
+    for a in 0..3 {
+        if d[a].abs() < 1e-12 {
+            if o[a] < bmin[a] || o[a] > bmax[a] {
+                return None;
+            }
+            continue;
+        }
+        let (t0, t1) = ((bmin[a] - o[a]) / d[a], (bmax[a] - o[a]) / d[a]);
+        lo = lo.max(t0.min(t1));
+        hi = hi.min(t0.max(t1));
+    }
+    (lo < hi && hi.is_finite()).then_some((lo, hi))
+}
+
+/// Everything a spawn needs about one frame.
+pub struct SpawnFrame<'a> {
+    pub camera: &'a Camera,
+    pub time: f32,
+    pub render: &'a [[f32; 4]],
+    pub gt: &'a [[f32; 4]],
+}
+
+/// The transients of one frame: up to `room` of them (the rest counted as over budget).
+/// `spacing`: the training frames' time spacing.
+pub fn transients_of(
+    f: &SpawnFrame<'_>,
+    cfg: &TransientConfig,
+    bounds: &Bounds,
+    spacing: f32,
+    sh_coeffs: u32,
+    room: usize,
+) -> (HostGaussians, usize, usize) {
+    let cam = f.camera;
+    let (px, cell) = worst_pixels(
+        f.render,
+        f.gt,
+        cam.width,
+        cam.height,
+        cfg.min_error,
+        cfg.pixels as usize,
+    );
+    let mut g = HostGaussians {
+        sh_coeffs,
+        ..Default::default()
+    };
+    let k = cfg.depths.max(1) as usize;
+    let tau = (cfg.init_frames.max(cfg.floor_frames) * spacing)
+        .max(1e-6)
+        .ln();
+    let logit = inverse_sigmoid(cfg.init_opacity);
+    let mut over = 0;
+    for &(x, y, _) in &px {
+        let (o, d) = pixel_ray(cam, x, y);
+        let Some((z0, z1)) = ray_box(o, d, bounds, cam.near.max(1e-3)) else {
+            continue;
+        };
+        let c = f.gt[(y * cam.width + x) as usize];
+        for j in 0..k {
+            if g.len() >= room {
+                over += 1;
+                continue;
+            }
+            let z = z0 + (z1 - z0) * (j as f32 + 0.5) / k as f32;
+            // About a cell's footprint at that depth: neighbouring picks overlap.
+            let s = (0.5 * cell as f32 * z / cam.fx).max(1e-6).ln();
+            g.means.push(std::array::from_fn(|a| o[a] + d[a] * z));
+            g.log_scales.push([s; 3]);
+            g.quats.push([1.0, 0.0, 0.0, 0.0]);
+            g.opacity.push(logit);
+            g.sh_dc.push([c[0], c[1], c[2]].map(rgb_to_sh_dc));
+            g.sh_rest.extend(vec![0.0; 3 * (sh_coeffs as usize - 1)]);
+            g.time.push([f.time, tau]);
+            g.velocity.push([0.0; 3]);
+        }
+    }
+    g.transients = g.len();
+    (g, px.len(), over)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn worst_frames_skip_unseen_and_sort_by_psnr() {
+        let p = [20.0, f32::NAN, 12.0, 15.0, 12.0];
+        assert_eq!(worst_frames(&p, 3), vec![2, 4, 3]);
+        assert_eq!(worst_frames(&[f32::NAN; 3], 2), Vec::<usize>::new());
+    }
+
+    #[test]
+    fn worst_pixels_spread_over_the_wrong_region() {
+        let (w, h) = (16u32, 8u32);
+        let gt = vec![[0.0f32; 4]; (w * h) as usize];
+        let mut r = gt.clone();
+        // A wrong 8×4 block, error growing with x.
+        for y in 2..6 {
+            for x in 4..12 {
+                r[(y * w + x) as usize] = [0.2 + 0.01 * x as f32; 4];
+            }
+        }
+        let (p, cell) = worst_pixels(&r, &gt, w, h, 0.1, 8);
+        assert_eq!(cell, 2, "32 pixels over the threshold, 8 picks: 2×2 cells");
+        assert_eq!(p.len(), 8);
+        assert!(p
+            .iter()
+            .all(|&(x, y, _)| (4..12).contains(&x) && (2..6).contains(&y)));
+        // No two picks in one cell, worst first.
+        for (i, a) in p.iter().enumerate() {
+            for b in &p[i + 1..] {
+                assert!((a.0 / 2, a.1 / 2) != (b.0 / 2, b.1 / 2));
+            }
+        }
+        assert!(p.windows(2).all(|w| w[0].2 >= w[1].2));
+        assert!(worst_pixels(&gt, &gt, w, h, 0.1, 8).0.is_empty());
+    }
+
+    #[test]
+    fn a_pixel_ray_back_projects_to_its_pixel_inside_the_box() {
+        let cam = Camera {
+            rot: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            trans: [0.0, 0.0, 5.0],
+            fx: 50.0,
+            fy: 50.0,
+            cx: 32.0,
+            cy: 32.0,
+            width: 64,
+            height: 64,
+            near: 0.01,
+        };
+        let b = Bounds {
+            min: glam::Vec3::splat(-1.0),
+            max: glam::Vec3::splat(1.0),
+        };
+        let (o, d) = pixel_ray(&cam, 40, 20);
+        let (z0, z1) = ray_box(o, d, &b, 0.01).expect("hits the box");
+        assert!(
+            (z0 - 4.0).abs() < 1e-4 && (z1 - 6.0).abs() < 1e-4,
+            "{z0} {z1}"
+        );
+        let p: [f32; 3] = std::array::from_fn(|a| o[a] + d[a] * 5.0);
+        let q: [f32; 3] = std::array::from_fn(|r| {
+            (0..3).map(|a| cam.rot[r][a] * p[a]).sum::<f32>() + cam.trans[r]
+        });
+        let (u, v) = (cam.fx * q[0] / q[2] + cam.cx, cam.fy * q[1] / q[2] + cam.cy);
+        assert!((u - 40.5).abs() < 1e-3 && (v - 20.5).abs() < 1e-3 && (q[2] - 5.0).abs() < 1e-4);
+        // A ray that misses the box.
+        assert!(ray_box(o, [0.0, 1.0, 0.0], &b, 0.01).is_none());
+    }
+}

@@ -1,0 +1,182 @@
+//! Transient Gaussians in training (issue 37): spawned from the residual, kept after the
+//! canonical rows through densification, learning only their own temporal sections, spared by
+//! the opacity reset, carried through checkpoints, written to `transients.ply`, reopened by
+//! `eval` (the same scores) and exported per frame by `render --ply` (only what is alive).
+
+mod train_common;
+
+use dispflow_vk::model::gaussians::Section;
+use dispflow_vk::testing;
+use dispflow_vk::train::config::{TrainConfig, TransientMode};
+use dispflow_vk::train::Trainer;
+use train_common::{tiny_config, tiny_dataset, tiny_scene};
+
+/// The tiny scene with transients spawned every 30 steps from iteration 60, densification every
+/// 50 from 40, an opacity reset at 150.
+fn cfg() -> TrainConfig {
+    let mut c = tiny_config(210);
+    c.warm_up = 60;
+    c.densify.opacity_reset_interval = 150;
+    c.transient.mode = TransientMode::On;
+    c.transient.every = 30;
+    c.transient.from = 0.25;
+    c.transient.until = 0.9;
+    c.transient.frames = 2;
+    c.transient.pixels = 16;
+    c.transient.depths = 2;
+    c.transient.min_error = 0.05;
+    c
+}
+
+#[test]
+fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let cfg = cfg();
+    let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
+    let mut spawned = 0;
+    while tr.iteration < cfg.iterations {
+        tr.step(false, false).unwrap();
+        let (v, _) = tr.last_loss().unwrap();
+        assert!(v.loss.is_finite(), "iteration {}: {v:?}", tr.iteration);
+        let g = &tr.model.gaussians;
+        let host = g.download(&gpu).unwrap();
+        let first = g.deformed() as usize;
+        assert_eq!(host.canonical(), first);
+        // Canonical rows never learn a time (their temporal sections stay exactly 0); every
+        // transient has a finite width of its own.
+        if g.transients > 0 {
+            for (i, t) in host.time.iter().enumerate() {
+                if i < first {
+                    assert_eq!(
+                        *t,
+                        [0.0, 0.0],
+                        "iteration {}: canonical row {i}",
+                        tr.iteration
+                    );
+                    assert_eq!(host.velocity[i], [0.0; 3]);
+                } else {
+                    assert!(t[1] < 0.0 && t[1].is_finite(), "transient {i}: {t:?}");
+                }
+            }
+        }
+        if tr.iteration == 150 {
+            // The reset clamps the canonical opacities only.
+            let reset = (0.01f32 / 0.99).ln() + 1e-4;
+            assert!(host.opacity[..first].iter().all(|&l| l <= reset));
+            assert!(
+                host.opacity[first..].iter().any(|&l| l > reset),
+                "transients spared by the reset"
+            );
+        }
+        if let Some((it, s)) = &tr.last_spawn {
+            if *it == tr.iteration {
+                spawned += s.spawned;
+                assert!(s.spawned > 0, "iteration {it}: {s}");
+            }
+        }
+    }
+    assert!(spawned > 0 && tr.model.gaussians.transients > 0);
+    // A checkpoint with transients restores into a fresh trainer exactly.
+    let c = tr.checkpoint().unwrap();
+    assert!(c.model.gaussians.transients > 0);
+    let mut again = Trainer::new(&gpu, &cfg, &ds).unwrap();
+    again.restore(&c).unwrap();
+    assert_eq!(
+        again.model.gaussians.transients,
+        tr.model.gaussians.transients
+    );
+    assert_eq!(again.checkpoint().unwrap(), c);
+    let centre: Vec<f32> = gpu
+        .read(again.model.gaussians.param(Section::TimeCentre))
+        .unwrap();
+    assert!(centre.iter().all(|c| c.is_finite()));
+}
+
+#[test]
+fn a_transient_run_writes_reopens_and_exports_its_transients() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(tmp.path());
+    let toml = tmp.path().join("t.toml");
+    std::fs::write(&toml, cfg().to_toml()).unwrap();
+    let out = tmp.path().join("run");
+    let bin = env!("CARGO_BIN_EXE_dispflow-vk");
+    let o = std::process::Command::new(bin)
+        .env("LP_NUM_THREADS", "1")
+        .args(["train", "--preset", "fast", "--config"])
+        .arg(&toml)
+        .arg("--data")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("spawned after iteration"), "{stderr}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    let nt = m["gaussians_transient"].as_u64().unwrap();
+    assert!(nt > 0, "{m}");
+    assert_eq!(
+        m["gaussians_canonical"].as_u64().unwrap() + nt,
+        m["num_gaussians"].as_u64().unwrap()
+    );
+    assert!(out.join("transients.ply").is_file());
+    // eval reopens point_cloud.ply + transients.ply and scores the same model.
+    let o = std::process::Command::new(bin)
+        .env("LP_NUM_THREADS", "1")
+        .args(["eval", "--no-pictures", "--run"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let e: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("eval/metrics.json")).unwrap())
+            .unwrap();
+    let (a, b) = (m["psnr"].as_f64().unwrap(), e["psnr"].as_f64().unwrap());
+    assert!((a - b).abs() < 0.05, "train {a} dB, eval {b} dB");
+    assert_eq!(e["num_gaussians"], m["num_gaussians"]);
+    // Per-frame PLYs hold the canonical Gaussians and only the transients alive then.
+    let o = std::process::Command::new(bin)
+        .env("LP_NUM_THREADS", "1")
+        .args(["render", "--path", "test", "--ply", "--run"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let canonical = m["gaussians_canonical"].as_u64().unwrap();
+    let plys = walk(&out.join("render"), "ply");
+    let counts: Vec<u64> = plys
+        .iter()
+        .filter(|p| {
+            p.file_name()
+                .unwrap()
+                .to_string_lossy()
+                .starts_with("frame_")
+        })
+        .map(|p| dispflow_vk::eval::reference::ply_vertex_count(p).unwrap() as u64)
+        .collect();
+    assert!(!counts.is_empty(), "{plys:?}");
+    assert!(
+        counts.iter().all(|&c| c >= canonical && c < canonical + nt),
+        "{counts:?}"
+    );
+}
+
+fn walk(d: &std::path::Path, ext: &str) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    if let Ok(rd) = std::fs::read_dir(d) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                out.extend(walk(&p, ext));
+            } else if p.extension().is_some_and(|x| x == ext) {
+                out.push(p);
+            }
+        }
+    }
+    out
+}
