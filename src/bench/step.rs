@@ -147,6 +147,46 @@ pub(crate) fn timed_config(weight: f32) -> TrainConfig {
     cfg
 }
 
+/// The label of the transient row: today's kernels with a quarter of the same Gaussians
+/// turned into transients (issue 37: what a step costs at the same total count).
+pub const TRANSIENT_ROW: &str = "the device's kernel set, 25 % of the Gaussians transient";
+
+/// Turns the last quarter of `tr`'s Gaussians into transients: centres spread over the time
+/// range, widths at twice the floor, small velocities; so at any time a few of them are alive,
+/// the rest culled before projection, as in a trained model.
+pub fn make_quarter_transient(tr: &mut Trainer) -> Result<()> {
+    let gpu = tr.gpu;
+    let mut g = tr.gaussians()?;
+    let n = g.len();
+    let k = n / 4;
+    let floor = tr.model.transient.log_floor;
+    g.time = (0..n)
+        .map(|i| {
+            let j = i.saturating_sub(n - k);
+            [
+                (j as f32 + 0.5) / k.max(1) as f32,
+                floor + std::f32::consts::LN_2,
+            ]
+        })
+        .collect();
+    g.velocity = (0..n)
+        .map(|i| [0.1 * ((i % 7) as f32 - 3.0), 0.0, 0.05])
+        .collect();
+    g.transients = k;
+    let mlp = tr.model.deform.download(gpu)?;
+    let it = tr.iteration;
+    tr.load_model(&g, &mlp, it)
+}
+
+/// The index in [`KERNEL_SETS`] of the set a device runs without overrides.
+pub fn default_set(gpu: &Gpu) -> usize {
+    if gpu.info.kind == "CPU" {
+        1
+    } else {
+        0
+    }
+}
+
 /// Times `steps` steps (after `warm`) of each scene × method × kernel set.
 pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> {
     let mut rows = Vec::new();
@@ -166,12 +206,26 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             std::env::remove_var("DISPFLOW_MLP_KERNELS");
             std::env::remove_var("DISPFLOW_BLEND_FWD");
             std::env::remove_var("DISPFLOW_BLEND_BWD");
+            // The device's own kernel set (as `for_device` picks: CPU-shaped on lavapipe) with a
+            // quarter of the Gaussians transient.
+            let own = KERNEL_SETS[default_set(gpu)];
+            std::env::set_var("DISPFLOW_MLP_KERNELS", own.mlp);
+            std::env::set_var("DISPFLOW_BLEND_FWD", own.blend_fwd);
+            std::env::set_var("DISPFLOW_BLEND_BWD", own.blend_bwd);
+            let mut tr = Trainer::new(gpu, &cfg, &data)?;
+            tr.step(false, false)?;
+            std::env::remove_var("DISPFLOW_MLP_KERNELS");
+            std::env::remove_var("DISPFLOW_BLEND_FWD");
+            std::env::remove_var("DISPFLOW_BLEND_BWD");
+            make_quarter_transient(&mut tr)?;
+            trainers.push(tr);
+            let labels = KERNEL_SETS.iter().map(|k| k.name).chain([TRANSIENT_ROW]);
             let times = time_interleaved(&mut trainers, warm, steps)?;
-            for ((tr, t), k) in trainers.iter().zip(times).zip(KERNEL_SETS) {
+            for ((tr, t), k) in trainers.iter().zip(times).zip(labels) {
                 rows.push(StepRow {
                     scene: scene.clone(),
                     method,
-                    kernels: k.name,
+                    kernels: k,
                     gaussians: tr.n(),
                     median_ms: median(t.iter().map(Timings::total_ms).collect()),
                     zones: median_zones(&t),
@@ -221,6 +275,25 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
                 .map(|(n, ms)| (n.clone(), 100.0 * ms / r.median_ms))
                 .collect(),
         });
+    }
+    for r in rows.iter().filter(|r| r.kernels == TRANSIENT_ROW) {
+        // The same kernels without transients.
+        let own = KERNEL_SETS[default_set(gpu)].name;
+        if let Some(b) = rows
+            .iter()
+            .find(|b| b.scene == r.scene && b.method == r.method && b.kernels == own)
+        {
+            println!(
+                "{} {}: a step with a quarter of its {} Gaussians transient costs {:.2}× one \
+                 without ({:.2} vs {:.2} ms)",
+                r.scene,
+                r.method,
+                r.gaussians,
+                r.median_ms / b.median_ms,
+                r.median_ms,
+                b.median_ms
+            );
+        }
     }
     Ok(out)
 }

@@ -315,10 +315,11 @@ pub enum TransientMode {
 /// Transient Gaussians (issue 37, `kernels::temporal`): a second population, local in time,
 /// for what one canonical space plus a deformation cannot draw (an object that moves most of
 /// its size per frame under a new camera each frame, appears, vanishes or splits). Every
-/// `every` steps in [`from`, `until`] × iterations the `frames` training frames with the
-/// lowest PSNR at their last step are rendered; their `pixels` worst pixels above `min_error`
-/// are back-projected at `depths` depths along the ray inside the scene's bounds into
-/// transients centred at that frame's time. Times are in frame spacings (the median gap
+/// `every` steps in [`from`, `until`] × iterations, `3 × frames` training frames spread over
+/// time are rendered; of the `frames` with the largest localized residual, the `pixels` worst
+/// pixels above `min_error` (and three times the frame's median error) are back-projected at
+/// `depths` depths along the ray inside the scene's bounds into transients centred at that
+/// frame's time (`train::transients`). Times are in frame spacings (the median gap
 /// between consecutive training times), so no transient lives in one camera's view only.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -340,7 +341,9 @@ pub struct TransientConfig {
     pub min_error: f32,
     /// Opacity of a new transient.
     pub init_opacity: f32,
-    /// Most of the Gaussian budget transients may hold.
+    /// The share of the Gaussian budget kept for transients: the canonical population starts
+    /// and densifies within the rest (so a scene whose initial points fill the budget still
+    /// has room to spawn), transients spawn and densify within it.
     pub max_share: f32,
     /// Learning rates of the time centre (time units), of the log-width, and of the velocity
     /// as a multiple of the position rate per σ floor (a transient then moves about as far
@@ -365,7 +368,7 @@ impl Default for TransientConfig {
             depths: 4,
             min_error: 0.12,
             init_opacity: 0.3,
-            max_share: 0.5,
+            max_share: 0.25,
             lr_centre: 0.002,
             lr_width: 0.01,
             lr_velocity_mult: 1.0,
@@ -706,6 +709,18 @@ impl TrainConfig {
         match p {
             Preset::Paper => TrainConfig::paper(),
             Preset::Fast => TrainConfig::fast(),
+        }
+    }
+
+    /// Gaussians the canonical population may hold: the budget less the transients' share when
+    /// they are on.
+    pub fn canonical_budget(&self) -> u32 {
+        match self.transient.mode {
+            TransientMode::On => {
+                let b = self.densify.budget as f64 * (1.0 - self.transient.max_share as f64);
+                (b as u32).max(1)
+            }
+            TransientMode::Off => self.densify.budget,
         }
     }
 

@@ -145,7 +145,8 @@ pub fn initial_gaussians(data: &Dataset, cfg: &TrainConfig) -> Result<(HostGauss
             }
         }
     }
-    let budget = cfg.densify.budget as usize;
+    // With transients on, the canonical population leaves their share of the budget free.
+    let budget = cfg.canonical_budget() as usize;
     if host.len() <= budget {
         return Ok((host, report));
     }

@@ -93,13 +93,12 @@ pub struct Trainer<'g> {
     pub init_report: init::InitReport,
     /// Multiplier of the deformation's learning rate (halved by each collapse rollback).
     pub deform_lr_scale: f64,
-    /// Per training frame, the PSNR of the last step that trained it (NaN: not yet): where
-    /// transients are spawned.
-    pub frame_psnr: Vec<f32>,
     /// The scene's bounds and the near distance (where spawned transients may lie).
     bounds: crate::data::Bounds,
     /// The last spawn of transients and its iteration.
     pub last_spawn: Option<(u32, transients::SpawnReport)>,
+    /// Spawns done (rotates the candidate frames).
+    spawns: usize,
 }
 
 /// The temporal stage's constants for training frames `train`: σ's floor in time units
@@ -170,7 +169,6 @@ impl<'g> Trainer<'g> {
             frames::camera_extent(&data.train),
         );
         let raster = Rc::new(Rasterizer::new(gpu)?);
-        let n_train = train.len();
         // Settings the passes read, checked now (the passes themselves are built on the first
         // step: `eval` and `render` open a run without allocating training scratch).
         cfg.scene_motion.flow_config(&cfg.flow_preset)?;
@@ -191,9 +189,9 @@ impl<'g> Trainer<'g> {
             last_plan: None,
             init_report,
             deform_lr_scale: 1.0,
-            frame_psnr: vec![f32::NAN; n_train],
             bounds: data.bounds,
             last_spawn: None,
+            spawns: 0,
         })
     }
 
@@ -284,9 +282,6 @@ impl<'g> Trainer<'g> {
             }
             self.iteration = p.iteration;
             self.last_plan = Some(p);
-            if let Some((v, _)) = self.last_loss() {
-                self.frame_psnr[p.frame] = v.psnr as f32;
-            }
             self.densify_if_due(&p)?;
             if p.classify {
                 self.classify()?;
@@ -364,7 +359,13 @@ impl<'g> Trainer<'g> {
         };
         let view = self.view();
         let spacing = self.times.spacing;
-        for i in transients::worst_frames(&self.frame_psnr, tc.frames as usize) {
+        // Candidates spread over time (rotating each spawn), rendered; the frames with the
+        // largest localized residual spawn.
+        let cands =
+            transients::candidate_frames(self.times.by_time(), 3 * tc.frames as usize, self.spawns);
+        self.spawns += 1;
+        let mut shots = Vec::new();
+        for &i in &cands {
             let f = &self.frames[i];
             let (camera, time) = (f.camera, f.time);
             let gt: Vec<[f32; 4]> = self.gpu.read(f.target.all())?;
@@ -373,19 +374,27 @@ impl<'g> Trainer<'g> {
             let e = self.eval.as_mut().expect("built");
             let shot = e.view(gpu, &self.model, view, &camera, time, None)?;
             let Some(im) = shot.images else { continue };
+            let r = transients::local_residual(&im.render, &gt, tc.min_error);
+            shots.push((r, i, im.render, gt));
+        }
+        report.looked_at = shots.len();
+        shots.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        for (r, i, render, gt) in shots.into_iter().take(tc.frames as usize) {
+            if r <= 0.0 {
+                break;
+            }
+            let f = &self.frames[i];
             let sf = transients::SpawnFrame {
-                camera: &camera,
-                time,
-                render: &im.render,
+                camera: &f.camera,
+                time: f.time,
+                render: &render,
                 gt: &gt,
             };
             let left = room - all.len();
             let sh = self.model.gaussians.layout.sh_coeffs;
             let (t, picked, over) =
                 transients::transients_of(&sf, &tc, &self.bounds, spacing, sh, left);
-            report
-                .frames
-                .push((self.frames[i].id.clone(), self.frame_psnr[i], picked));
+            report.frames.push((f.id.clone(), r, picked));
             report.over_budget += over;
             all.append(&t);
         }
@@ -681,7 +690,13 @@ fn build_passes(
         loss: PhotoLoss::new(gpu, sizes)?,
         motion,
         adam: AdamPass::new(gpu)?,
-        densify: DensifyPass::new(gpu, cfg.densify, times.extent, cfg.seed)?,
+        densify: DensifyPass::new(
+            gpu,
+            cfg.densify,
+            cfg.densify.budget - cfg.canonical_budget(),
+            times.extent,
+            cfg.seed,
+        )?,
         watch: OverflowWatch::new(gpu, "step overflow flags", 2)?,
         classifier: classifier(gpu, cfg, sizes, times, frames)?,
     })

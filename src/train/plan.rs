@@ -66,6 +66,11 @@ impl FrameTimes {
         self.by_time[lo + frame_for_iteration(cfg.seed, it, span)]
     }
 
+    /// Frame indices in time order (ties by index).
+    pub fn by_time(&self) -> &[usize] {
+        &self.by_time
+    }
+
     /// The temporal neighbour of frame `fi`: `gap` frames later in time (earlier at the end).
     pub fn pair(&self, fi: usize, gap: u32) -> usize {
         let (r, n, gap) = (self.rank[fi], self.by_time.len(), gap.max(1) as usize);

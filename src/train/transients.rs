@@ -1,7 +1,10 @@
 //! Spawning transient Gaussians from the residual (issue 37). Pure host code over images the
-//! trainer hands in: which training frames to look at (the lowest PSNR at their last step),
-//! which of their pixels are wrong enough (the largest errors, one per cell of a grid so they
-//! spread over the wrong region), and the Gaussians that back-project them: at `depths` depths
+//! trainer hands in: which training frames to look at (`3 × frames` candidates spread over
+//! time, rotating each spawn; the `frames` with the largest localized residual spawn), which
+//! of their pixels are wrong enough (at least `min_error` and three times the frame's median
+//! error, so a view the model gets wrong everywhere, such as a camera the static model fails,
+//! spawns nothing; the largest errors, one per cell of a grid so they spread over the wrong
+//! region), and the Gaussians that back-project them: at `depths` depths
 //! along each pixel's ray inside the scene's bounds (the missing object's depth is unknown; a
 //! wrong-depth transient fits one view, not the several cameras of its lifetime, and is
 //! pruned), centred at the frame's time with σ = `init_frames` frame spacings, no velocity.
@@ -14,8 +17,9 @@ use crate::train::config::TransientConfig;
 /// What one spawn did (logged).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SpawnReport {
-    /// Frames looked at: (id, PSNR at its last step, pixels taken).
-    pub frames: Vec<(String, f32, usize)>,
+    /// Frames spawned from: (id, localized residual, pixels taken), of `looked_at` rendered.
+    pub frames: Vec<(String, f64, usize)>,
+    pub looked_at: usize,
     /// Transients added.
     pub spawned: usize,
     /// Pixels over the error threshold that the budget left out.
@@ -27,17 +31,18 @@ impl std::fmt::Display for SpawnReport {
         let frames: Vec<String> = self
             .frames
             .iter()
-            .map(|(id, p, k)| format!("{id} ({p:.1} dB, {k} px)"))
+            .map(|(id, r, k)| format!("{id} (residual {r:.1}, {k} px)"))
             .collect();
         write!(
             f,
-            "{} transients from {}",
+            "{} transients from {} of {} frames looked at",
             self.spawned,
             if frames.is_empty() {
-                "no frame".to_string()
+                "none".to_string()
             } else {
                 frames.join(", ")
-            }
+            },
+            self.looked_at
         )?;
         if self.over_budget > 0 {
             write!(f, "; {} pixels left out by the budget", self.over_budget)?;
@@ -46,17 +51,53 @@ impl std::fmt::Display for SpawnReport {
     }
 }
 
-/// The `k` frames with the lowest known PSNR (NaN = not trained yet: skipped), worst first.
-pub fn worst_frames(psnr: &[f32], k: usize) -> Vec<usize> {
-    let mut idx: Vec<usize> = (0..psnr.len()).filter(|&i| !psnr[i].is_nan()).collect();
-    idx.sort_by(|&a, &b| psnr[a].total_cmp(&psnr[b]).then(a.cmp(&b)));
-    idx.truncate(k);
-    idx
+/// Candidate frames of spawn number `round`: `k` of the `n` training frames, evenly spread over
+/// the time order `by_time`, the offset rotating with `round` so that successive spawns look at
+/// every frame in turn.
+pub fn candidate_frames(by_time: &[usize], k: usize, round: usize) -> Vec<usize> {
+    let n = by_time.len();
+    if n == 0 || k == 0 {
+        return Vec::new();
+    }
+    let k = k.min(n);
+    let stride = n / k;
+    let offset = round % stride.max(1);
+    (0..k).map(|j| by_time[(j * stride + offset) % n]).collect()
 }
 
-/// Pixels whose mean absolute RGB error is at least `min_error`, at most one per `cell`×`cell`
-/// block (its worst), the `k` worst of those; and the side of the cells. `render`, `gt`:
-/// [H·W] RGBA.
+/// The localized residual of a render: the summed error of the pixels that [`worst_pixels`]
+/// would spawn from (0 when the frame is wrong everywhere alike, or right everywhere).
+pub fn local_residual(render: &[[f32; 4]], gt: &[[f32; 4]], min_error: f32) -> f64 {
+    let err = pixel_errors(render, gt);
+    let thr = min_error.max(RELATIVE_ERROR * median(&err));
+    err.iter().filter(|&&e| e >= thr).map(|&e| e as f64).sum()
+}
+
+fn pixel_errors(render: &[[f32; 4]], gt: &[[f32; 4]]) -> Vec<f32> {
+    render
+        .iter()
+        .zip(gt)
+        .map(|(r, g)| ((r[0] - g[0]).abs() + (r[1] - g[1]).abs() + (r[2] - g[2]).abs()) / 3.0)
+        .collect()
+}
+
+fn median(v: &[f32]) -> f32 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s = v.to_vec();
+    let m = s.len() / 2;
+    *s.select_nth_unstable_by(m, f32::total_cmp).1
+}
+
+/// How much worse than the frame's median error a pixel must be to spawn: a transient is for
+/// a local failure (an object missing, ghosted, misplaced), not for a view the model gets wrong
+/// everywhere.
+pub const RELATIVE_ERROR: f32 = 3.0;
+
+/// Pixels whose mean absolute RGB error is at least `min_error` and [`RELATIVE_ERROR`] times
+/// the frame's median, at most one per `cell`×`cell` block (its worst), the `k` worst of those;
+/// and the side of the cells. `render`, `gt`: [H·W] RGBA.
 pub fn worst_pixels(
     render: &[[f32; 4]],
     gt: &[[f32; 4]],
@@ -65,11 +106,8 @@ pub fn worst_pixels(
     min_error: f32,
     k: usize,
 ) -> (Vec<(u32, u32, f32)>, u32) {
-    let err: Vec<f32> = render
-        .iter()
-        .zip(gt)
-        .map(|(r, g)| ((r[0] - g[0]).abs() + (r[1] - g[1]).abs() + (r[2] - g[2]).abs()) / 3.0)
-        .collect();
+    let err = pixel_errors(render, gt);
+    let min_error = min_error.max(RELATIVE_ERROR * median(&err));
     let over = err.iter().filter(|&&e| e >= min_error).count();
     if over == 0 || k == 0 {
         return (Vec::new(), 1);
@@ -198,10 +236,28 @@ mod tests {
     use super::*;
 
     #[test]
-    fn worst_frames_skip_unseen_and_sort_by_psnr() {
-        let p = [20.0, f32::NAN, 12.0, 15.0, 12.0];
-        assert_eq!(worst_frames(&p, 3), vec![2, 4, 3]);
-        assert_eq!(worst_frames(&[f32::NAN; 3], 2), Vec::<usize>::new());
+    fn candidates_spread_over_time_and_rotate() {
+        let by_time: Vec<usize> = (0..12).rev().collect(); // frame 11 first in time
+        assert_eq!(candidate_frames(&by_time, 4, 0), vec![11, 8, 5, 2]);
+        assert_eq!(candidate_frames(&by_time, 4, 1), vec![10, 7, 4, 1]);
+        assert_eq!(
+            candidate_frames(&by_time, 4, 3),
+            vec![11, 8, 5, 2],
+            "every frame in turn"
+        );
+        assert_eq!(candidate_frames(&by_time, 20, 0).len(), 12);
+        assert!(candidate_frames(&[], 4, 0).is_empty());
+    }
+
+    #[test]
+    fn the_residual_is_local() {
+        let gt = vec![[0.0f32; 4]; 100];
+        let mut r = gt.clone();
+        r[7] = [0.9; 4];
+        r[8] = [0.6; 4];
+        assert!((local_residual(&r, &gt, 0.1) - 1.5).abs() < 1e-6);
+        // Wrong everywhere alike: nothing local.
+        assert_eq!(local_residual(&vec![[0.5f32; 4]; 100], &gt, 0.1), 0.0);
     }
 
     #[test]
@@ -229,6 +285,9 @@ mod tests {
         }
         assert!(p.windows(2).all(|w| w[0].2 >= w[1].2));
         assert!(worst_pixels(&gt, &gt, w, h, 0.1, 8).0.is_empty());
+        // Wrong everywhere: nothing stands out of the frame's median, nothing spawns.
+        let all = vec![[0.5f32; 4]; (w * h) as usize];
+        assert!(worst_pixels(&all, &gt, w, h, 0.1, 8).0.is_empty());
     }
 
     #[test]
@@ -248,10 +307,17 @@ mod tests {
             min: glam::Vec3::splat(-1.0),
             max: glam::Vec3::splat(1.0),
         };
-        let (o, d) = pixel_ray(&cam, 40, 20);
+        let (o, d) = pixel_ray(&cam, 31, 31);
         let (z0, z1) = ray_box(o, d, &b, 0.01).expect("hits the box");
         assert!(
             (z0 - 4.0).abs() < 1e-4 && (z1 - 6.0).abs() < 1e-4,
+            "{z0} {z1}"
+        );
+        // A slanted ray leaves through a side: y = −1 at depth 1/(11.5/50) from the centre.
+        let (o, d) = pixel_ray(&cam, 40, 20);
+        let (z0, z1) = ray_box(o, d, &b, 0.01).expect("hits the box");
+        assert!(
+            (z0 - 4.0).abs() < 1e-4 && (z1 - 50.0 / 11.5).abs() < 1e-4,
             "{z0} {z1}"
         );
         let p: [f32; 3] = std::array::from_fn(|a| o[a] + d[a] * 5.0);

@@ -130,6 +130,8 @@ pub struct DensifyPass {
     densifier: Densifier,
     pub bufs: DensifyBuffers,
     cfg: DensifyConfig,
+    /// Rows kept free for transients (their share of the budget, less what they hold).
+    transient_share: u32,
     extent: f32,
     seed: u32,
     temporal: Temporal,
@@ -138,12 +140,20 @@ pub struct DensifyPass {
 }
 
 impl DensifyPass {
-    pub fn new(gpu: &Gpu, cfg: DensifyConfig, extent: f32, seed: u64) -> Result<Self> {
+    /// `transient_share`: the budget's rows kept for transients (0 without them).
+    pub fn new(
+        gpu: &Gpu,
+        cfg: DensifyConfig,
+        transient_share: u32,
+        extent: f32,
+        seed: u64,
+    ) -> Result<Self> {
         let densifier = Densifier::new(gpu)?;
         Ok(DensifyPass {
             bufs: densifier.buffers(gpu, cfg.budget)?,
             densifier,
             cfg,
+            transient_share,
             extent,
             seed: seed as u32,
             temporal: Temporal::new(gpu)?,
@@ -177,7 +187,9 @@ impl DensifyPass {
         screen_cut: bool,
     ) -> Result<()> {
         let d = &self.cfg;
-        let mut s = DensifySettings::new(self.extent, d.budget);
+        // Growth stops where it would eat into the transients' free share.
+        let reserve = self.transient_share.saturating_sub(g.transients);
+        let mut s = DensifySettings::new(self.extent, d.budget.saturating_sub(reserve).max(g.n));
         s.grad_threshold = d.grad_threshold;
         s.percent_dense = d.percent_dense;
         s.min_opacity = d.min_opacity;
