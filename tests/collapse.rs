@@ -347,3 +347,83 @@ fn train_reports_a_mass_prune_and_stops_when_none_is_left() {
     let m = std::fs::read_to_string(out.join("metrics.json")).unwrap();
     assert!(!m.contains("mass_prunes"));
 }
+
+/// A Gaussian whose mean turns NaN draws nothing (the projection culls it), so no loss or
+/// render shows it, only the saved model (issue 36: an H100 paper-preset run saved one and
+/// reported ok). The parameter check finds it on the GPU, names its row and section, and
+/// retires it: every parameter finite, the render unchanged, training goes on. A non-finite
+/// deformation weight is found too and left for the caller (it cannot be repaired).
+#[test]
+fn a_non_finite_gaussian_is_found_and_retired() {
+    use dispflow_vk::model::gaussians::Section;
+    use dispflow_vk::train::params_check::{bad_rows, ParamCheck};
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let cfg = tiny_config(40);
+    let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
+    train_common::run_to(&mut tr, 10);
+    let check = ParamCheck::new(&gpu).unwrap();
+    assert_eq!(check.run(&mut tr).unwrap(), None, "a healthy model");
+    let before = tr.train_view_psnr(0).unwrap();
+
+    let means = tr.model.gaussians.param(Section::Means);
+    let mut m: Vec<f32> = gpu.read(means).unwrap();
+    let row = 7;
+    m[3 * row + 1] = f32::NAN;
+    gpu.upload(means, &m).unwrap();
+    let planted = tr.train_view_psnr(0).unwrap();
+    assert!(
+        (planted - before).abs() < 1e-3,
+        "the NaN Gaussian is culled, not drawn: {before:.3} → {planted:.3} dB"
+    );
+
+    let fault = check.run(&mut tr).unwrap().expect("the NaN mean is found");
+    assert_eq!((fault.gaussians, fault.first_row), (1, Some(row)));
+    assert_eq!((fault.sections.clone(), fault.weights), (vec!["means"], 0));
+    assert!(fault
+        .describe()
+        .contains("1 Gaussian(s) with non-finite means (first: row 7)"));
+    let g = tr.gaussians().unwrap();
+    assert!(
+        bad_rows(&g).is_empty(),
+        "every parameter finite after retiring"
+    );
+    assert!(g.opacity[row] < -10.0, "retired: {}", g.opacity[row]);
+    let after = tr.train_view_psnr(0).unwrap();
+    assert!(
+        (after - planted).abs() < 1e-3,
+        "retiring a culled Gaussian changes no pixel: {planted:.4} → {after:.4} dB"
+    );
+    assert_eq!(check.run(&mut tr).unwrap(), None, "nothing left to find");
+    train_common::run_to(&mut tr, 20);
+    assert!(tr.last_loss().unwrap().0.loss.is_finite());
+
+    // Through the guard: found at its next probe, reported as repaired, the run goes on.
+    let (mut guard, _) = CollapseGuard::new(&mut tr).unwrap();
+    let means = tr.model.gaussians.param(Section::Means);
+    let mut m: Vec<f32> = gpu.read(means).unwrap();
+    m[3 * 3] = f32::NEG_INFINITY;
+    gpu.upload(means, &m).unwrap();
+    let mut ev = None;
+    while ev.is_none() && tr.iteration < cfg.iterations {
+        tr.step(false, false).unwrap();
+        let done = tr.last_plan.unwrap();
+        let loss = tr.last_loss().unwrap().0.loss;
+        ev = guard.after_step(&mut tr, &done, loss).unwrap();
+    }
+    let ev = ev.expect("the guard finds the planted value");
+    assert_eq!(ev.kind, "non_finite_gaussians");
+    assert!(!ev.stops_run());
+    assert!(ev.detail.unwrap().contains("(first: row 3)"));
+    assert!(bad_rows(&tr.gaussians().unwrap()).is_empty());
+
+    // A non-finite deformation weight: reported, not repaired.
+    let w = tr.model.deform.params.all();
+    let mut v: Vec<f32> = gpu.read(w).unwrap();
+    v[3] = f32::INFINITY;
+    gpu.upload(w, &v).unwrap();
+    let fault = check.run(&mut tr).unwrap().expect("the weight is found");
+    assert_eq!((fault.weights, fault.gaussians), (1, 0));
+}

@@ -136,6 +136,56 @@ fn renders_are_scored_into_a_sweep_cell_that_the_report_tables() {
     assert!(image.contains("official Deformable-3DGS"), "{image}");
 }
 
+/// The dataset's own frames scored against themselves (the official run's `gt/` folder at the
+/// stored resolution): every frame is pixel-identical and scores the cap, 100 dB, in a cell
+/// the report reads (∞ would be written as JSON null and refused).
+#[test]
+fn identical_frames_score_the_cap() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tiny_scene(tmp.path());
+    let opts = LoadOptions {
+        progress: false,
+        ..LoadOptions::default()
+    };
+    let ds = data::load(&scene, &opts).unwrap();
+    let gt = tmp.path().join("gt");
+    std::fs::create_dir_all(&gt).unwrap();
+    for (i, f) in ds.val.iter().enumerate() {
+        let saved = save_png(
+            &gt.join(format!("{i:05}.png")),
+            f.image.width,
+            f.image.height,
+            &f.image.data,
+        );
+        assert_eq!(
+            saved, f.image.data,
+            "the 8-bit frames survive a PNG round trip"
+        );
+    }
+    let out = tmp.path().join("sweep");
+    let (ok, text) = score(&[
+        "--data",
+        scene.to_str().unwrap(),
+        "--renders",
+        gt.to_str().unwrap(),
+        "--iterations",
+        "1",
+        "--scene",
+        "gt",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    let rs = read_results(&out.join("results.jsonl")).unwrap();
+    assert_eq!(rs[0].psnr, dispflow_vk::eval::reference::PSNR_CAP);
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dispflow-vk"))
+        .args(["sweep", "report"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
 #[test]
 fn a_wrong_folder_is_refused_by_name() {
     let tmp = tempfile::tempdir().unwrap();

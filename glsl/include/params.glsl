@@ -251,6 +251,14 @@ struct TemporalParams {
     float t_hi;
 };
 
+// src/kernels/check.rs — non-finite counts of one buffer range into a slot.
+struct CheckParams {
+    uint first;   // the range's first float
+    uint count;   // its length in floats
+    uint slot;    // where the count (counts[slot]) and the first bad index (counts[slots + slot]) go
+    uint slots;
+};
+
 // src/kernels/densify.rs — per-view densification statistics (after every backward pass).
 struct DensifyStatsParams {
     uint num_gaussians;

@@ -120,6 +120,11 @@ fn invalid(path: &Path, why: impl std::fmt::Display) -> Error {
 }
 
 /// The PNG files of `dir`, sorted by name.
+/// The PSNR a pixel-identical frame scores (∞ otherwise: JSON has no infinity, and a mean
+/// over frames needs a finite value). Scoring a run's own ground-truth PNGs, the check that the
+/// two pipelines load the same frames, gives exactly this.
+pub const PSNR_CAP: f64 = 100.0;
+
 pub fn render_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let rd = std::fs::read_dir(dir).map_err(|e| invalid(dir, format!("cannot read: {e}")))?;
     let mut v: Vec<PathBuf> = rd
@@ -216,10 +221,10 @@ pub fn score_folder(gpu: &Gpu, a: &ScoreArgs, ds: &Dataset) -> Result<Vec<Render
                 .unwrap_or_default(),
             id: frame.id.clone(),
             time: frame.time,
-            psnr: v.psnr,
+            psnr: v.psnr.min(PSNR_CAP),
             ssim: v.ssim,
-            dynamic_psnr: regions.and_then(|r| r.dynamic),
-            static_psnr: regions.and_then(|r| r.static_),
+            dynamic_psnr: regions.and_then(|r| r.dynamic).map(|p| p.min(PSNR_CAP)),
+            static_psnr: regions.and_then(|r| r.static_).map(|p| p.min(PSNR_CAP)),
             lpips,
         });
     }

@@ -2,6 +2,7 @@
 //! `glsl/include/params.glsl`, pipelines built once, `record()` taking explicit buffers.
 
 pub mod adam;
+pub mod check;
 pub mod deform;
 pub mod densify;
 pub mod dispflow;
@@ -67,6 +68,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         layout!(sparse::FlagParams, n, threshold_px, pad0, pad1),
         layout!(sparse::RowsParams, n, width, pad0, pad1),
         layout!(nodes::NodesParams, n, m, k, flags),
+        layout!(check::CheckParams, first, count, slot, slots),
         layout!(
             temporal::TemporalParams,
             n,

@@ -136,10 +136,19 @@ impl NodeState {
     }
 
     /// Places the nodes by farthest-point sampling of `means` and uploads them (moments zeroed).
+    /// A non-finite mean is passed over (the Gaussian draws nothing; the collapse guard's
+    /// parameter check retires it at its next probe): as the farthest point it would become a
+    /// node, and every node a NaN.
     pub fn place(&mut self, gpu: &Gpu, means: &[[f32; 3]]) -> Result<()> {
+        let finite: Vec<[f32; 3]> = means
+            .iter()
+            .filter(|m| m.iter().all(|v| v.is_finite()))
+            .copied()
+            .collect();
+        let means = &finite[..];
         if means.is_empty() {
             return Err(Error::Invalid(
-                "control nodes: no Gaussians to place them on".into(),
+                "control nodes: no Gaussians with finite means to place them on".into(),
             ));
         }
         let (picks, cover) = farthest_points(means, self.cfg.nodes as usize);

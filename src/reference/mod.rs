@@ -2,6 +2,7 @@
 //! They define what the kernels must compute; tests compare the two on identical inputs.
 
 pub mod adam;
+pub mod check;
 pub mod deform;
 pub mod densify;
 pub mod dispflow;

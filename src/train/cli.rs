@@ -174,9 +174,11 @@ pub struct TrainArgs {
     /// about 4× cheaper), upsampled afterwards [preset: paper 0, fast 1].
     #[arg(long)]
     pub flow_level: Option<u32>,
-    /// What a collapse does (a non-finite loss, or the windowed training PSNR falling by
-    /// `collapse.drop_db` (2 dB) below its best for three windows): warn (say so in the progress
-    /// line, log.jsonl and metrics.json; a non-finite loss stops the run) or rollback
+    /// What a collapse does (a non-finite loss, render or parameter, or the mean PSNR of four
+    /// probe training views, spread over time, falling `collapse.drop_db` (2 dB) below its best
+    /// for two rounds over them): warn (say so in the progress line, log.jsonl and
+    /// metrics.json, whose `status` reads collapsed unless the run climbs back; a non-finite
+    /// loss stops the run) or rollback
     /// (restore the last good in-memory checkpoint and go on with the deformation rate
     /// halved, at most 8 times; after two rollbacks that meet the same fall as deep, the rate
     /// is not its cause and the run goes on without rolling back) [default: warn].

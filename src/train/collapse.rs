@@ -97,7 +97,8 @@ pub struct CollapseEvent {
     /// The step at which the fall was confirmed (the loss or a probe render turned
     /// non-finite, or the fall lasted [`CONFIRM_ROUNDS`] rounds).
     pub iteration: u32,
-    /// `psnr_drop` (the probe views fell), `non_finite_loss` or `non_finite_render`.
+    /// `psnr_drop` (the probe views fell), `non_finite_loss`, `non_finite_render`,
+    /// `non_finite_weights` or `non_finite_gaussians` (repaired: the run goes on).
     pub kind: String,
     /// The probe views' mean best PSNR before the fall and their mean latest PSNR at
     /// `iteration` (dB; the last finite ones for a non-finite loss).
@@ -113,6 +114,22 @@ pub struct CollapseEvent {
     /// rollbacks, so the run went on from here without rolling back.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub rollback_stopped: bool,
+    /// What a `non_finite_gaussians` / `non_finite_weights` event found (see
+    /// `params_check`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detail: Option<String>,
+}
+
+impl CollapseEvent {
+    /// Whether the run cannot go on from this event as it stands (a non-finite loss, render or
+    /// deformation weight that was not rolled back).
+    pub fn stops_run(&self) -> bool {
+        self.rolled_back_to.is_none()
+            && matches!(
+                self.kind.as_str(),
+                "non_finite_loss" | "non_finite_render" | "non_finite_weights"
+            )
+    }
 }
 
 /// Share of the Gaussians one densification step must remove to be reported.
@@ -270,7 +287,7 @@ impl CollapseWatch {
         (!loss.is_finite()).then(|| self.event(iteration, "non_finite_loss"))
     }
 
-    fn event(&self, iteration: u32, kind: &str) -> CollapseEvent {
+    pub fn event(&self, iteration: u32, kind: &str) -> CollapseEvent {
         let level = self.level().unwrap_or(f64::NAN);
         CollapseEvent {
             iteration,
@@ -280,6 +297,7 @@ impl CollapseWatch {
             rolled_back_to: None,
             deform_lr_scale: None,
             rollback_stopped: false,
+            detail: None,
         }
     }
 
@@ -322,15 +340,23 @@ pub enum RunStatus {
     /// Collapses that rollbacks recovered from (their count is `rollbacks`), ending at or
     /// above the initial test PSNR.
     RolledBack,
+    /// Nothing else wrong, but Gaussians whose parameters turned non-finite were retired on
+    /// the way (`params_check`; they drew nothing, so the renders are as they were).
+    Repaired,
 }
 
 impl RunStatus {
     /// A run's status from its collapse events and its initial and final test PSNR, with the
-    /// reason when it is not ok. `initial_psnr` is `None` for a resumed run (not measured).
+    /// reason when it is not ok (or a note on a fall it recovered from). `initial_psnr` is
+    /// `None` for a resumed run (not measured). `end` is the probe views' last mean PSNR and
+    /// the drop that counts as a fall (`collapse.drop_db`): a PSNR fall the run climbed back
+    /// from, to within that drop of where it fell from, is not left standing (a recipe
+    /// without warm-up can dip early and end the best of its sweep).
     pub fn judge(
         events: &[CollapseEvent],
         initial_psnr: Option<f64>,
         final_psnr: f64,
+        end: Option<(f64, f64)>,
     ) -> (RunStatus, Option<String>) {
         if let Some(i) = initial_psnr.filter(|i| final_psnr.is_nan() || final_psnr < *i) {
             return (
@@ -340,7 +366,14 @@ impl RunStatus {
                 )),
             );
         }
-        if let Some(e) = events.iter().find(|e| e.rolled_back_to.is_none()) {
+        const REPAIRED: &str = "non_finite_gaussians";
+        let recovered = |e: &CollapseEvent| {
+            e.kind == "psnr_drop" && end.is_some_and(|(probe, drop)| probe >= e.before_db - drop)
+        };
+        if let Some(e) = events
+            .iter()
+            .find(|e| e.rolled_back_to.is_none() && e.kind != REPAIRED && !recovered(e))
+        {
             return (
                 RunStatus::Collapsed,
                 Some(format!(
@@ -359,6 +392,30 @@ impl RunStatus {
                 Some(format!("rolled back {rollbacks} time(s), then trained on")),
             );
         }
+        let repaired: Vec<String> = events
+            .iter()
+            .filter(|e| e.kind == REPAIRED)
+            .map(|e| {
+                let what = e
+                    .detail
+                    .as_deref()
+                    .unwrap_or("non-finite Gaussians retired");
+                format!("iteration {}: {what}", e.iteration)
+            })
+            .collect();
+        if !repaired.is_empty() {
+            return (RunStatus::Repaired, Some(repaired.join("; ")));
+        }
+        if let (Some(e), Some((probe, _))) = (events.first(), end) {
+            return (
+                RunStatus::Ok,
+                Some(format!(
+                    "psnr drop at iteration {} (probe views {:.2} -> {:.2} dB), recovered \
+                     (probe views {probe:.2} dB at the end)",
+                    e.iteration, e.before_db, e.after_db
+                )),
+            );
+        }
         (RunStatus::Ok, None)
     }
 
@@ -367,6 +424,7 @@ impl RunStatus {
             RunStatus::Ok => "ok",
             RunStatus::Collapsed => "collapsed",
             RunStatus::RolledBack => "rolled back",
+            RunStatus::Repaired => "repaired",
         }
     }
 }
@@ -533,22 +591,58 @@ mod tests {
             rolled_back_to: rolled,
             deform_lr_scale: rolled.map(|_| 0.5),
             rollback_stopped: false,
+            detail: None,
         };
-        assert_eq!(RunStatus::judge(&[], Some(13.0), 20.0).0, RunStatus::Ok);
-        assert_eq!(RunStatus::judge(&[], None, 20.0).0, RunStatus::Ok);
-        let (s, why) = RunStatus::judge(&[], Some(13.15), 7.03);
+        assert_eq!(
+            RunStatus::judge(&[], Some(13.0), 20.0, None).0,
+            RunStatus::Ok
+        );
+        assert_eq!(RunStatus::judge(&[], None, 20.0, None).0, RunStatus::Ok);
+        let (s, why) = RunStatus::judge(&[], Some(13.15), 7.03, None);
         assert_eq!(s, RunStatus::Collapsed);
         assert!(why
             .unwrap()
             .contains("below its initial test PSNR (7.03 < 13.15 dB)"));
-        let (s, why) = RunStatus::judge(&[ev(None)], Some(13.15), 14.0);
+        let (s, why) = RunStatus::judge(&[ev(None)], Some(13.15), 14.0, Some((10.0, 2.0)));
         assert_eq!(s, RunStatus::Collapsed);
         assert!(why.unwrap().contains("psnr drop at iteration 350"));
-        let (s, why) = RunStatus::judge(&[ev(Some(0)), ev(Some(0))], Some(13.15), 24.0);
+        // Back within the drop of where it fell from (13.15 - 2): a dip, not a collapse; one
+        // short of it (11.1) is still a collapse.
+        let (s, why) = RunStatus::judge(&[ev(None)], Some(13.15), 14.0, Some((11.2, 2.0)));
+        assert_eq!(s, RunStatus::Ok);
+        assert!(why.unwrap().contains("recovered (probe views 11.20 dB"));
+        let end = Some((11.1, 2.0));
+        assert_eq!(
+            RunStatus::judge(&[ev(None)], Some(13.15), 14.0, end).0,
+            RunStatus::Collapsed
+        );
+        // A non-finite loss never counts as recovered.
+        let mut nf = ev(None);
+        nf.kind = "non_finite_loss".into();
+        assert_eq!(
+            RunStatus::judge(&[nf], Some(13.15), 14.0, Some((20.0, 2.0))).0,
+            RunStatus::Collapsed
+        );
+        let (s, why) = RunStatus::judge(&[ev(Some(0)), ev(Some(0))], Some(13.15), 24.0, None);
         assert_eq!(s, RunStatus::RolledBack);
         assert!(why.unwrap().contains("rolled back 2 time(s)"));
+        // Retired non-finite Gaussians: repaired, with what was found; under a real
+        // collapse they do not hide it.
+        let mut nf = ev(None);
+        nf.kind = "non_finite_gaussians".into();
+        nf.detail = Some("3 Gaussian(s) with non-finite means".into());
+        let (s, why) = RunStatus::judge(&[nf.clone()], Some(13.15), 14.0, Some((20.0, 2.0)));
+        assert_eq!(s, RunStatus::Repaired);
+        assert!(why
+            .unwrap()
+            .contains("iteration 350: 3 Gaussian(s) with non-finite means"));
+        let both = [nf, ev(None)];
         assert_eq!(
-            RunStatus::judge(&[], Some(13.0), f64::NAN).0,
+            RunStatus::judge(&both, Some(13.15), 14.0, None).0,
+            RunStatus::Collapsed
+        );
+        assert_eq!(
+            RunStatus::judge(&[], Some(13.0), f64::NAN, None).0,
             RunStatus::Collapsed
         );
     }

@@ -14,6 +14,7 @@ use super::collapse::{
     CollapseEvent, CollapseWatch, OnCollapse, CONFIRM_ROUNDS, MAX_ROLLBACKS, PROBE_VIEWS,
     SAME_DEPTH, SAME_PLACE_ROLLBACKS,
 };
+use super::params_check::ParamCheck;
 use super::plan::StepPlan;
 use super::Trainer;
 use crate::error::{Error, Result};
@@ -48,6 +49,8 @@ pub struct CollapseGuard {
     /// rollbacks in a row met an unchanged fall there.
     last_fall: Option<(u32, f64)>,
     same_place: u32,
+    /// The parameters' finiteness, checked with every probe render and after the last step.
+    params: ParamCheck,
 }
 
 impl CollapseGuard {
@@ -78,6 +81,7 @@ impl CollapseGuard {
             rollbacks: 0,
             last_fall: None,
             same_place: 0,
+            params: ParamCheck::new(tr.gpu)?,
         };
         Ok((guard, first))
     }
@@ -111,6 +115,25 @@ impl CollapseGuard {
             let k = (tr.iteration / self.every) as usize % self.views.len();
             let psnr = tr.train_view_psnr(self.views[k])?;
             ev = self.watch.see(tr.iteration, k, psnr);
+        }
+        if ev.is_none() && (tr.iteration % self.every == 0 || tr.iteration == tr.cfg.iterations) {
+            ev = self.params.run(tr)?.map(|f| {
+                let kind = if f.weights > 0 {
+                    "non_finite_weights"
+                } else {
+                    "non_finite_gaussians"
+                };
+                let mut e = self.watch.event(tr.iteration, kind);
+                e.detail = Some(f.describe());
+                e
+            });
+            if ev
+                .as_ref()
+                .is_some_and(|e| e.kind == "non_finite_gaussians")
+            {
+                // Repaired in place: reported, nothing to roll back.
+                return Ok(ev);
+            }
         }
         let Some(ev) = ev else {
             self.keep(tr)?;

@@ -17,6 +17,7 @@ pub mod init;
 pub mod method;
 pub mod metrics;
 pub mod outputs;
+pub mod params_check;
 pub mod passes;
 pub mod plan;
 mod run_loop;

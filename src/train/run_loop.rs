@@ -106,8 +106,21 @@ fn collapse_note(ev: &CollapseEvent, deform_lr_scale: f64) -> String {
         ),
         None => " (--on-collapse rollback would restore an earlier state)".into(),
     };
+    if ev.kind == "non_finite_gaussians" {
+        return format!(
+            "warning: iteration {}: {}",
+            ev.iteration,
+            ev.detail
+                .as_deref()
+                .unwrap_or("non-finite Gaussians retired")
+        );
+    }
+    let detail = ev
+        .detail
+        .as_ref()
+        .map_or(String::new(), |d| format!(" ({d})"));
     format!(
-        "warning: collapse at iteration {}: {}, probe views' PSNR {:.2} → {:.2} dB{what}",
+        "warning: collapse at iteration {}: {}{detail}, probe views' PSNR {:.2} → {:.2} dB{what}",
         ev.iteration,
         ev.kind.replace('_', " "),
         ev.before_db,
@@ -172,7 +185,7 @@ pub(super) fn train_loop(
                 if let Some(r) = ev.rolled_back_to {
                     // The abandoned iterations' lines go; the next line carries the event.
                     log.cut_to(r)?;
-                } else if ev.kind != "psnr_drop" {
+                } else if ev.stops_run() {
                     log.write(&LogLine {
                         iteration: ev.iteration,
                         loss,
@@ -181,15 +194,30 @@ pub(super) fn train_loop(
                         collapse: Some(ev.clone()),
                         ..LogLine::default()
                     })?;
+                    let detail = ev
+                        .detail
+                        .as_ref()
+                        .map_or(String::new(), |d| format!(": {d}"));
                     return Err(Error::Invalid(format!(
-                        "iteration {}: {} (loss {loss}); rerun with --on-collapse rollback to \
-                         restore an earlier state with a lower deformation rate",
+                        "iteration {}: {}{detail} (loss {loss}); rerun with --on-collapse \
+                         rollback to restore an earlier state with a lower deformation rate",
                         ev.iteration,
                         ev.kind.replace('_', " "),
                     )));
                 }
                 let rolled_back = ev.rolled_back_to.is_some();
-                collapse = Some(ev);
+                if let Some(old) = collapse.replace(ev).filter(|_| !rolled_back) {
+                    // Two events before one log line: the first gets a line of its own.
+                    log.write(&LogLine {
+                        iteration: old.iteration,
+                        loss,
+                        psnr,
+                        num_gaussians: tr.n(),
+                        wall_s: stats.train_seconds(),
+                        collapse: Some(old),
+                        ..LogLine::default()
+                    })?;
+                }
                 if rolled_back {
                     // A resumed run must not return to the abandoned branch.
                     tr.checkpoint()?.save(ckpt)?;

@@ -283,7 +283,9 @@ fn finish(
     metrics.time_to_psnr = super::curve::time_to_psnr(&log);
     metrics.collapses = log.iter().filter_map(|l| l.collapse.clone()).collect();
     metrics.mass_prunes = log.iter().filter_map(|l| l.prune.clone()).collect();
-    let (status, why) = RunStatus::judge(&metrics.collapses, initial_psnr, metrics.psnr);
+    let end = log.iter().rev().find_map(|l| l.probe_psnr);
+    let end = end.map(|probe| (probe, cfg.collapse.drop_db as f64));
+    let (status, why) = RunStatus::judge(&metrics.collapses, initial_psnr, metrics.psnr, end);
     metrics.status = Some(status);
     metrics.status_note = why.clone();
     metrics.rollbacks = metrics
@@ -291,8 +293,10 @@ fn finish(
         .iter()
         .filter(|e| e.rolled_back_to.is_some())
         .count() as u32;
-    if let Some(why) = why.filter(|_| status == RunStatus::Collapsed) {
-        progress.note(&format!("warning: the run {why}"));
+    match (&why, status) {
+        (Some(why), RunStatus::Collapsed) => progress.note(&format!("warning: the run {why}")),
+        (Some(why), RunStatus::Ok) => progress.note(&format!("note: {why}")),
+        _ => {}
     }
     crate::report::save_png(
         &super::outputs::training_plot(&log)?,
