@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-use dispflow_vk::train::checkpoint::Checkpoint;
+use dispflow_vk::train::checkpoint::{Checkpoint, CHECKPOINT_VERSION};
 
 /// A fixture directory under the target's temp dir: the tiny scene, a cache/home for the
 /// child processes and one short trained run (for eval, render and resume cases).
@@ -755,13 +755,14 @@ fn resume_bad_checkpoints() {
                 edit(&r.join("checkpoints/last.ckpt"), |b| {
                     let hl = u64::from_le_bytes(b[8..16].try_into().unwrap()) as usize;
                     let h = String::from_utf8(b[16..16 + hl].to_vec()).unwrap();
-                    let h1 = h.replacen("\"version\":3", "\"version\":1", 1);
+                    let current = format!("\"version\":{CHECKPOINT_VERSION}");
+                    let h1 = h.replacen(&current, "\"version\":1", 1);
                     assert_ne!(h, h1);
                     b.splice(16..16 + hl, h1.into_bytes());
                 })
             },
             &[],
-            &["last.ckpt", "format version 1", "reads version 3"],
+            &["last.ckpt", "format version 1", "reads version"],
         ),
         (
             "flags that differ from the run's config.toml",

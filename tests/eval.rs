@@ -71,8 +71,10 @@ fn eval_and_render_a_tiny_run() {
     for l in &lines {
         // The logged view is one of the interval's views, so the worst is at most its PSNR.
         let (worst, psnr) = (
-            l["worst_psnr"].as_f64().unwrap(),
-            l["psnr"].as_f64().unwrap(),
+            l["worst_psnr"]
+                .as_f64()
+                .unwrap_or_else(|| panic!("no worst_psnr: {l}")),
+            l["psnr"].as_f64().unwrap_or_else(|| panic!("no psnr: {l}")),
         );
         assert!(worst <= psnr + 1e-9, "{l}");
         assert!(l["worst_view"].is_string());

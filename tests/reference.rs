@@ -35,6 +35,17 @@ fn psnr(a: &[f32], b: &[f32]) -> f64 {
     10.0 * (1.0 / mse).log10()
 }
 
+/// The tiny built-in scene written under `dir`, and loaded as `score-renders` loads it.
+fn tiny(dir: &Path) -> (std::path::PathBuf, data::Dataset) {
+    let scene = tiny_scene(dir);
+    let opts = LoadOptions {
+        progress: false,
+        ..LoadOptions::default()
+    };
+    let ds = data::load(&scene, &opts).unwrap();
+    (scene, ds)
+}
+
 fn score(args: &[&str]) -> (bool, String) {
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_dispflow-vk"))
         .arg("score-renders")
@@ -52,12 +63,7 @@ fn score(args: &[&str]) -> (bool, String) {
 #[test]
 fn renders_are_scored_into_a_sweep_cell_that_the_report_tables() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = tiny_scene(tmp.path());
-    let opts = LoadOptions {
-        progress: false,
-        ..LoadOptions::default()
-    };
-    let ds = data::load(&scene, &opts).unwrap();
+    let (scene, ds) = tiny(tmp.path());
     assert!(ds.val.len() >= 2, "the tiny scene has test frames");
     let renders = tmp.path().join("renders");
     std::fs::create_dir_all(&renders).unwrap();
@@ -142,12 +148,7 @@ fn renders_are_scored_into_a_sweep_cell_that_the_report_tables() {
 #[test]
 fn identical_frames_score_the_cap() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = tiny_scene(tmp.path());
-    let opts = LoadOptions {
-        progress: false,
-        ..LoadOptions::default()
-    };
-    let ds = data::load(&scene, &opts).unwrap();
+    let (scene, ds) = tiny(tmp.path());
     let gt = tmp.path().join("gt");
     std::fs::create_dir_all(&gt).unwrap();
     for (i, f) in ds.val.iter().enumerate() {

@@ -21,6 +21,7 @@ fn nodes_config() -> TrainConfig {
     cfg.flow_preset = "fast".into();
     cfg.densify.from = 10;
     cfg.densify.interval = 20; // densify at 20 and 40: before and after the interruption
+    cfg.densify.until = 61; // and at the last step, 60 (`until` is exclusive, as the official)
     cfg.deform_field.kind = FieldKind::Nodes;
     cfg.deform_field.nodes = 24;
     cfg.deform_field.knn = 4;

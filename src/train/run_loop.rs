@@ -258,8 +258,8 @@ pub(super) fn train_loop(
                 ));
             }
             let level = guard.probe_level();
+            let worst = worst.take();
             if message {
-                let worst = worst.take();
                 let transients = if transients_on {
                     format!(" ({} transient)", tr.model.gaussians.transients)
                 } else {
@@ -302,8 +302,8 @@ pub(super) fn train_loop(
                 transients: transients_on.then_some(tr.model.gaussians.transients),
                 probe_psnr: level.map(|l| l.0),
                 probe_fall_db: level.map(|l| l.1),
-                worst_psnr: None,
-                worst_view: None,
+                worst_psnr: worst.as_ref().map(|w| w.0),
+                worst_view: worst.map(|w| w.1),
                 collapse: collapse.take(),
                 prune: prune.take(),
             })?;
