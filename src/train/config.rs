@@ -337,6 +337,10 @@ pub struct TransientConfig {
     pub frames: u32,
     pub pixels: u32,
     pub depths: u32,
+    /// Temporal neighbours each side (0: off) whose residuals a wrong pixel is tracked through
+    /// (`train::track`): a pixel whose residual a point moving at a constant velocity explains
+    /// in them spawns one transient there, with that velocity, instead of `depths` still ones.
+    pub track: u32,
     /// Mean absolute RGB error (colours in [0, 1]) a pixel needs to spawn transients.
     pub min_error: f32,
     /// Opacity of a new transient.
@@ -366,6 +370,7 @@ impl Default for TransientConfig {
             frames: 4,
             pixels: 64,
             depths: 4,
+            track: 2,
             min_error: 0.12,
             init_opacity: 0.3,
             max_share: 0.25,

@@ -24,6 +24,7 @@ mod run_loop;
 pub mod score;
 pub mod session;
 pub mod step;
+pub mod track;
 pub mod transients;
 
 use std::rc::Rc;
@@ -54,6 +55,14 @@ use passes::{
 use passes::{SceneSignal, Slot};
 use plan::{Decomposition, FrameTimes, StepPlan};
 use step::StepPasses;
+use track::{Residual, Tracker};
+
+/// A training frame's render and its ground truth, [H·W] RGBA each.
+type Shot = (Vec<[f32; 4]>, Vec<[f32; 4]>);
+
+/// The farthest a tracked transient may move per frame spacing, as a share of the scene
+/// bounds' diagonal (a hypothesis faster than that is a false match across the scene).
+const MAX_STEP_OF_BOUNDS: f32 = 0.25;
 
 /// Numbers reported per logged step.
 #[derive(Clone, Debug, Default)]
@@ -367,36 +376,65 @@ impl<'g> Trainer<'g> {
         self.spawns += 1;
         let mut shots = Vec::new();
         for &i in &cands {
-            let f = &self.frames[i];
-            let (camera, time) = (f.camera, f.time);
-            let gt: Vec<[f32; 4]> = self.gpu.read(f.target.all())?;
-            let gpu = self.gpu;
-            self.evaluator()?;
-            let e = self.eval.as_mut().expect("built");
-            let shot = e.view(gpu, &self.model, view, &camera, time, None)?;
-            let Some(im) = shot.images else { continue };
-            let r = transients::local_residual(&im.render, &gt, tc.min_error);
-            shots.push((r, i, im.render, gt));
+            let Some((render, gt)) = self.shot(i, view)? else {
+                continue;
+            };
+            let r = transients::local_residual(&render, &gt, tc.min_error);
+            shots.push((r, i, render, gt));
         }
         report.looked_at = shots.len();
         shots.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        for (r, i, render, gt) in shots.into_iter().take(tc.frames as usize) {
-            if r <= 0.0 {
-                break;
+        shots.truncate(tc.frames as usize);
+        shots.retain(|s| s.0 > 0.0);
+        // Tracking reads the spawning frames' temporal neighbours too.
+        let mut near = std::collections::BTreeMap::new();
+        for s in &shots {
+            for j in self.times.neighbours(s.1, tc.track as usize) {
+                if let std::collections::btree_map::Entry::Vacant(e) = near.entry(j) {
+                    if let Some(shot) = self.shot(j, view)? {
+                        e.insert(shot);
+                    }
+                }
             }
-            let f = &self.frames[i];
+        }
+        let diag = (self.bounds.max - self.bounds.min).length();
+        let v_max = MAX_STEP_OF_BOUNDS * diag / spacing.max(1e-9);
+        for (r, i, render, gt) in &shots {
+            let f = &self.frames[*i];
+            let tracker = (tc.track > 0).then(|| {
+                let nb = self
+                    .times
+                    .neighbours(*i, tc.track as usize)
+                    .into_iter()
+                    .filter_map(|j| {
+                        let (rj, gj) = near.get(&j)?;
+                        let fj = &self.frames[j];
+                        Some(Residual::new(&fj.camera, fj.time, rj, gj, tc.min_error))
+                    })
+                    .collect();
+                let me = Residual::new(&f.camera, f.time, render, gt, tc.min_error);
+                Tracker::new(me, nb, v_max)
+            });
             let sf = transients::SpawnFrame {
                 camera: &f.camera,
                 time: f.time,
-                render: &render,
-                gt: &gt,
+                render,
+                gt,
             };
             let left = room - all.len();
             let sh = self.model.gaussians.layout.sh_coeffs;
-            let (t, picked, over) =
-                transients::transients_of(&sf, &tc, &self.bounds, spacing, sh, left);
-            report.frames.push((f.id.clone(), r, picked));
-            report.over_budget += over;
+            let (t, fs) = transients::transients_of(
+                &sf,
+                &tc,
+                &self.bounds,
+                spacing,
+                sh,
+                left,
+                tracker.as_ref(),
+            );
+            report.frames.push((f.id.clone(), *r, fs.picked));
+            report.tracked += fs.tracked;
+            report.over_budget += fs.over;
             all.append(&t);
         }
         report.spawned = all.len();
@@ -407,6 +445,19 @@ impl<'g> Trainer<'g> {
         }
         self.last_spawn = Some((self.iteration, report));
         Ok(())
+    }
+
+    /// Training frame `i` rendered as the model is drawn now, with its ground truth (`None`
+    /// when the evaluator gives no image).
+    fn shot(&mut self, i: usize, view: ModelView) -> Result<Option<Shot>> {
+        let f = &self.frames[i];
+        let (camera, time) = (f.camera, f.time);
+        let gt: Vec<[f32; 4]> = self.gpu.read(f.target.all())?;
+        let gpu = self.gpu;
+        self.evaluator()?;
+        let e = self.eval.as_mut().expect("built");
+        let shot = e.view(gpu, &self.model, view, &camera, time, None)?;
+        Ok(shot.images.map(|im| (im.render, gt)))
     }
 
     /// Splits the model into dynamic and static Gaussians now (the motion probe). `None`

@@ -71,6 +71,15 @@ impl FrameTimes {
         &self.by_time
     }
 
+    /// Frame `fi`'s temporal neighbours: up to `k` before and `k` after it in time order.
+    pub fn neighbours(&self, fi: usize, k: usize) -> Vec<usize> {
+        let (r, n) = (self.rank[fi], self.by_time.len());
+        (r.saturating_sub(k)..(r + k + 1).min(n))
+            .filter(|&j| j != r)
+            .map(|j| self.by_time[j])
+            .collect()
+    }
+
     /// The temporal neighbour of frame `fi`: `gap` frames later in time (earlier at the end).
     pub fn pair(&self, fi: usize, gap: u32) -> usize {
         let (r, n, gap) = (self.rank[fi], self.by_time.len(), gap.max(1) as usize);

@@ -22,6 +22,8 @@ pub struct SpawnReport {
     pub looked_at: usize,
     /// Transients added.
     pub spawned: usize,
+    /// Pixels tracked (each one transient with a velocity; `train::track`).
+    pub tracked: usize,
     /// Pixels over the error threshold that the budget left out.
     pub over_budget: usize,
 }
@@ -44,6 +46,9 @@ impl std::fmt::Display for SpawnReport {
             },
             self.looked_at
         )?;
+        if self.tracked > 0 {
+            write!(f, "; {} pixels tracked", self.tracked)?;
+        }
         if self.over_budget > 0 {
             write!(f, "; {} pixels left out by the budget", self.over_budget)?;
         }
@@ -69,11 +74,17 @@ pub fn candidate_frames(by_time: &[usize], k: usize, round: usize) -> Vec<usize>
 /// would spawn from (0 when the frame is wrong everywhere alike, or right everywhere).
 pub fn local_residual(render: &[[f32; 4]], gt: &[[f32; 4]], min_error: f32) -> f64 {
     let err = pixel_errors(render, gt);
-    let thr = min_error.max(RELATIVE_ERROR * median(&err));
+    let thr = threshold(&err, min_error);
     err.iter().filter(|&&e| e >= thr).map(|&e| e as f64).sum()
 }
 
-fn pixel_errors(render: &[[f32; 4]], gt: &[[f32; 4]]) -> Vec<f32> {
+/// The error a pixel needs to spawn: at least `min_error` and [`RELATIVE_ERROR`] times the
+/// frame's median.
+pub(crate) fn threshold(err: &[f32], min_error: f32) -> f32 {
+    min_error.max(RELATIVE_ERROR * median(err))
+}
+
+pub(crate) fn pixel_errors(render: &[[f32; 4]], gt: &[[f32; 4]]) -> Vec<f32> {
     render
         .iter()
         .zip(gt)
@@ -107,7 +118,7 @@ pub fn worst_pixels(
     k: usize,
 ) -> (Vec<(u32, u32, f32)>, u32) {
     let err = pixel_errors(render, gt);
-    let min_error = min_error.max(RELATIVE_ERROR * median(&err));
+    let min_error = threshold(&err, min_error);
     let over = err.iter().filter(|&&e| e >= min_error).count();
     if over == 0 || k == 0 {
         return (Vec::new(), 1);
@@ -174,8 +185,21 @@ pub struct SpawnFrame<'a> {
     pub gt: &'a [[f32; 4]],
 }
 
+/// What [`transients_of`] did with one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameSpawn {
+    /// Pixels picked.
+    pub picked: usize,
+    /// Of those, pixels tracked (one transient with a velocity each).
+    pub tracked: usize,
+    /// Transients the budget left out.
+    pub over: usize,
+}
+
 /// The transients of one frame: up to `room` of them (the rest counted as over budget).
-/// `spacing`: the training frames' time spacing.
+/// `spacing`: the training frames' time spacing. With a `tracker` over the frame's temporal
+/// neighbours (`train::track`), a pixel it tracks spawns one transient on its track, with its
+/// velocity; the others spawn at `depths` depths, still.
 pub fn transients_of(
     f: &SpawnFrame<'_>,
     cfg: &TransientConfig,
@@ -183,7 +207,8 @@ pub fn transients_of(
     spacing: f32,
     sh_coeffs: u32,
     room: usize,
-) -> (HostGaussians, usize, usize) {
+    tracker: Option<&crate::train::track::Tracker<'_>>,
+) -> (HostGaussians, FrameSpawn) {
     let cam = f.camera;
     let (px, cell) = worst_pixels(
         f.render,
@@ -202,33 +227,54 @@ pub fn transients_of(
         .max(1e-6)
         .ln();
     let logit = inverse_sigmoid(cfg.init_opacity);
-    let mut over = 0;
+    let mut out = FrameSpawn {
+        picked: px.len(),
+        ..Default::default()
+    };
+    let push = |g: &mut HostGaussians, p: [f32; 3], z: f32, v: [f32; 3], c: [f32; 4]| {
+        // About a cell's footprint at that depth: neighbouring picks overlap.
+        let s = (0.5 * cell as f32 * z / cam.fx).max(1e-6).ln();
+        g.means.push(p);
+        g.log_scales.push([s; 3]);
+        g.quats.push([1.0, 0.0, 0.0, 0.0]);
+        g.opacity.push(logit);
+        g.sh_dc.push([c[0], c[1], c[2]].map(rgb_to_sh_dc));
+        g.sh_rest.extend(vec![0.0; 3 * (sh_coeffs as usize - 1)]);
+        g.time.push([f.time, tau]);
+        g.velocity.push(v);
+    };
     for &(x, y, _) in &px {
+        let c = f.gt[(y * cam.width + x) as usize];
+        if let Some(t) = tracker.and_then(|tr| tr.track(x, y, bounds)) {
+            if g.len() >= room {
+                out.over += 1;
+                continue;
+            }
+            push(&mut g, t.mean, t.depth, t.velocity, c);
+            out.tracked += 1;
+            continue;
+        }
         let (o, d) = pixel_ray(cam, x, y);
         let Some((z0, z1)) = ray_box(o, d, bounds, cam.near.max(1e-3)) else {
             continue;
         };
-        let c = f.gt[(y * cam.width + x) as usize];
         for j in 0..k {
             if g.len() >= room {
-                over += 1;
+                out.over += 1;
                 continue;
             }
             let z = z0 + (z1 - z0) * (j as f32 + 0.5) / k as f32;
-            // About a cell's footprint at that depth: neighbouring picks overlap.
-            let s = (0.5 * cell as f32 * z / cam.fx).max(1e-6).ln();
-            g.means.push(std::array::from_fn(|a| o[a] + d[a] * z));
-            g.log_scales.push([s; 3]);
-            g.quats.push([1.0, 0.0, 0.0, 0.0]);
-            g.opacity.push(logit);
-            g.sh_dc.push([c[0], c[1], c[2]].map(rgb_to_sh_dc));
-            g.sh_rest.extend(vec![0.0; 3 * (sh_coeffs as usize - 1)]);
-            g.time.push([f.time, tau]);
-            g.velocity.push([0.0; 3]);
+            push(
+                &mut g,
+                std::array::from_fn(|a| o[a] + d[a] * z),
+                z,
+                [0.0; 3],
+                c,
+            );
         }
     }
     g.transients = g.len();
-    (g, px.len(), over)
+    (g, out)
 }
 
 #[cfg(test)]
