@@ -23,6 +23,11 @@ pub const TRACK_DEPTHS: usize = 32;
 pub const COLOUR_TOL: f32 = 0.15;
 /// Neighbour pixels a wrong pixel may lie from the projection (the depth grid's slack).
 const SLACK: i64 = 1;
+/// The most anchor pixels one track tries (evenly strided over those of its colour): a
+/// hypothesis costs `TRACK_DEPTHS²` × neighbours projections, and a large wrong region (a
+/// ghost, a big object at 800 px) would make a spawn cost seconds; the least-squares
+/// refinement takes the track from the nearest hypothesis to the rays it explains.
+pub const MAX_HYPOTHESES: usize = 48;
 
 /// A frame's residual, as tracking reads it.
 pub struct Residual<'a> {
@@ -110,8 +115,11 @@ fn ray_points(cam: &Camera, x: u32, y: u32, bounds: &Bounds) -> Vec<([f32; 3], f
         .collect()
 }
 
-/// An anchor pixel of the frame's colour: its colour distance, the pixel and its ray's points.
-type Hypotheses = (f32, (u32, u32), Vec<([f32; 3], f32)>);
+/// A hot pixel of the anchor: the pixel, its ground-truth colour and its ray's points.
+type Anchor = ((u32, u32), [f32; 4], Vec<([f32; 3], f32)>);
+/// A hypothesis: an anchor pixel's colour distance from the tracked pixel's, the pixel, and
+/// its ray's points.
+type Hypothesis<'t> = (f32, (u32, u32), &'t [([f32; 3], f32)]);
 
 /// A tracked point: where the pixel's surface is at the frame's time, how fast it moves, its
 /// depth in the frame's camera, and how many neighbours it explains.
@@ -128,24 +136,44 @@ pub struct Tracker<'a> {
     pub frame: Residual<'a>,
     /// Neighbours at another time than the frame's, nearest in time first.
     pub neighbours: Vec<Residual<'a>>,
-    /// The anchor's hot pixels (the first neighbour's): the hypotheses.
-    anchor_hot: Vec<(u32, u32)>,
+    /// The anchor's hot pixels (the first neighbour's) and their rays: the hypotheses, built
+    /// once for every pixel tracked.
+    anchor: Vec<Anchor>,
+    bounds: Bounds,
     /// The fastest motion accepted, in world units per time unit.
     pub v_max: f32,
 }
 
 impl<'a> Tracker<'a> {
-    /// `v_max`: see [`Tracker::v_max`]. Neighbours at the frame's own time are dropped (they
-    /// say nothing of a velocity).
-    pub fn new(frame: Residual<'a>, mut neighbours: Vec<Residual<'a>>, v_max: f32) -> Self {
+    /// `v_max`: see [`Tracker::v_max`]; points are sampled inside `bounds`. Neighbours at the
+    /// frame's own time are dropped (they say nothing of a velocity).
+    pub fn new(
+        frame: Residual<'a>,
+        mut neighbours: Vec<Residual<'a>>,
+        v_max: f32,
+        bounds: &Bounds,
+    ) -> Self {
         let t = frame.time;
         neighbours.retain(|n| (n.time - t).abs() > 1e-9);
         neighbours.sort_by(|a, b| (a.time - t).abs().total_cmp(&(b.time - t).abs()));
-        let anchor_hot = neighbours.first().map_or(Vec::new(), |a| a.hot_pixels());
+        let anchor = neighbours.first().map_or(Vec::new(), |a| {
+            let w = a.camera.width;
+            a.hot_pixels()
+                .into_iter()
+                .map(|(u, v)| {
+                    (
+                        (u, v),
+                        a.gt[(v * w + u) as usize],
+                        ray_points(a.camera, u, v, bounds),
+                    )
+                })
+                .collect()
+        });
         Tracker {
             frame,
             neighbours,
-            anchor_hot,
+            anchor,
+            bounds: *bounds,
             v_max,
         }
     }
@@ -159,32 +187,36 @@ impl<'a> Tracker<'a> {
     /// The track of pixel (x, y) of the frame, if one explains the anchor and
     /// [`Tracker::required`] of the other neighbours (the most explained, then the closest
     /// colours, win).
-    pub fn track(&self, x: u32, y: u32, bounds: &Bounds) -> Option<Track> {
+    pub fn track(&self, x: u32, y: u32) -> Option<Track> {
         let anchor = self.neighbours.first()?;
         let dt = anchor.time - self.frame.time;
-        let (f, a) = (self.frame.camera, anchor.camera);
+        let f = self.frame.camera;
         let g = self.frame.gt[(y * f.width + x) as usize];
         let c = [g[0], g[1], g[2]];
-        let here = ray_points(f, x, y, bounds);
-        // The anchor's hot pixels of the same colour, and their rays' points.
-        let there: Vec<Hypotheses> = self
-            .anchor_hot
+        let here = ray_points(f, x, y, &self.bounds);
+        // The anchor's hot pixels of the same colour (at most MAX_HYPOTHESES, strided).
+        let mut there: Vec<Hypothesis<'_>> = self
+            .anchor
             .iter()
-            .filter_map(|&(u, v)| {
-                let d = colour_distance(anchor.gt[(v * a.width + u) as usize], c);
-                (d < COLOUR_TOL).then(|| (d, (u, v), ray_points(a, u, v, bounds)))
+            .filter_map(|(at, gt, ray)| {
+                let d = colour_distance(*gt, c);
+                (d < COLOUR_TOL).then_some((d, *at, ray.as_slice()))
             })
             .collect();
+        let stride = there.len().div_ceil(MAX_HYPOTHESES).max(1);
+        if stride > 1 {
+            there = there.into_iter().step_by(stride).collect();
+        }
         let need = self.required();
         let mut best: Option<(Track, f32, (u32, u32))> = None;
         for &(p, z) in &here {
-            for (d0, at, ray) in &there {
+            for &(d0, at, ray) in &there {
                 for &(p2, _) in ray {
                     let v: [f32; 3] = std::array::from_fn(|k| (p2[k] - p[k]) / dt);
                     if v.iter().map(|x| x * x).sum::<f32>().sqrt() > self.v_max {
                         continue;
                     }
-                    let (mut n, mut cost, mut missed) = (0, *d0, 0);
+                    let (mut n, mut cost, mut missed) = (0, d0, 0);
                     for nb in &self.neighbours[1..] {
                         let s = nb.time - self.frame.time;
                         match nb.explains(std::array::from_fn(|k| p[k] + v[k] * s), c) {
@@ -211,7 +243,7 @@ impl<'a> Tracker<'a> {
                             depth: z,
                             explained: n,
                         };
-                        best = Some((t, cost, *at));
+                        best = Some((t, cost, at));
                     }
                 }
             }
@@ -350,13 +382,18 @@ mod tests {
 
     /// The ground truth of a ball of radius 0.15 at `p` on black, and a render without it.
     fn frame(cam: &Camera, p: [f32; 3], colour: [f32; 4]) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
+        ball(cam, p, 0.15, colour)
+    }
+
+    /// The same, radius `r`.
+    fn ball(cam: &Camera, p: [f32; 3], r: f32, colour: [f32; 4]) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
         let n = (cam.width * cam.height) as usize;
         let mut gt = vec![[0.0, 0.0, 0.0, 1.0]; n];
         let q: [f32; 3] = std::array::from_fn(|r| {
             (0..3).map(|a| cam.rot[r][a] * p[a]).sum::<f32>() + cam.trans[r]
         });
         let (u, v) = (cam.fx * q[0] / q[2] + cam.cx, cam.fy * q[1] / q[2] + cam.cy);
-        let rad = cam.fx * 0.15 / q[2];
+        let rad = cam.fx * r / q[2];
         for y in 0..cam.height {
             for x in 0..cam.width {
                 let (dx, dy) = (x as f32 + 0.5 - u, y as f32 + 0.5 - v);
@@ -394,7 +431,7 @@ mod tests {
         let run = |places: &dyn Fn(usize) -> [f32; 3], v_max: f32| {
             let imgs: Vec<_> = (0..5).map(|i| frame(&cams[i], places(i), ORANGE)).collect();
             let res = |i: usize| Residual::new(&cams[i], times[i], &imgs[i].1, &imgs[i].0, 0.1);
-            let tr = Tracker::new(res(2), vec![res(4), res(1), res(3), res(0)], v_max);
+            let tr = Tracker::new(res(2), vec![res(4), res(1), res(3), res(0)], v_max, &bounds);
             assert_eq!(tr.neighbours.len(), 4);
             assert!(
                 (tr.neighbours[0].time - 0.1).abs() < 1e-6
@@ -402,7 +439,7 @@ mod tests {
                 "nearest first"
             );
             assert_eq!(tr.required(), 2, "3 others: one may miss");
-            tr.track(x, y, &bounds)
+            tr.track(x, y)
         };
         let t = run(&|i| pos(times[i]), 100.0).expect("tracked");
         assert!(t.explained >= 2, "{t:?}");
@@ -443,14 +480,59 @@ mod tests {
             .collect();
         let res = |i: usize| Residual::new(&cams[i], i as f32, &imgs[i].1, &imgs[i].0, 0.1);
         let (x, y) = pixel_of(&cams[1], p);
-        let tr = Tracker::new(res(1), vec![res(0), res(2)], 100.0);
-        assert!(tr.track(x, y, &bounds).is_none());
+        let tr = Tracker::new(res(1), vec![res(0), res(2)], 100.0, &bounds);
+        assert!(tr.track(x, y).is_none());
         // Same colour everywhere: a still ball is tracked with no velocity.
         let imgs: Vec<_> = (0..3).map(|i| frame(&cams[i], p, ORANGE)).collect();
         let res = |i: usize| Residual::new(&cams[i], i as f32, &imgs[i].1, &imgs[i].0, 0.1);
-        let tr = Tracker::new(res(1), vec![res(0), res(2)], 100.0);
-        let t = tr.track(x, y, &bounds).expect("tracked");
+        let tr = Tracker::new(res(1), vec![res(0), res(2)], 100.0, &bounds);
+        let t = tr.track(x, y).expect("tracked");
         let speed = t.velocity.iter().map(|v| v * v).sum::<f32>().sqrt();
         assert!(speed < 0.2, "{t:?}");
+    }
+
+    #[test]
+    fn a_big_ball_is_tracked_from_a_strided_subset_of_its_pixels() {
+        // A ball whose image in the anchor has several times MAX_HYPOTHESES wrong pixels: the
+        // strided hypotheses and the refinement still find a path on it.
+        let bounds = Bounds {
+            min: glam::Vec3::splat(-2.0),
+            max: glam::Vec3::splat(2.0),
+        };
+        let cams = [
+            [6.0, 0.0, 3.0],
+            [0.0, 6.0, 3.0],
+            [-6.0, 0.5, 3.0],
+            [0.5, -6.0, 3.0],
+            [4.0, 4.0, 4.0],
+        ]
+        .map(look_at);
+        let (p0, vel, r) = ([-0.3f32, 0.2, 0.1], [3.0f32, -1.5, 1.0], 0.8f32);
+        let times: Vec<f32> = (0..5).map(|i| i as f32 * 0.1).collect();
+        let pos = |t: f32| -> [f32; 3] { std::array::from_fn(|k| p0[k] + vel[k] * (t - 0.2)) };
+        let imgs: Vec<_> = (0..5)
+            .map(|i| ball(&cams[i], pos(times[i]), r, ORANGE))
+            .collect();
+        let res = |i: usize| Residual::new(&cams[i], times[i], &imgs[i].1, &imgs[i].0, 0.1);
+        let tr = Tracker::new(res(2), vec![res(4), res(1), res(3), res(0)], 100.0, &bounds);
+        assert!(
+            tr.anchor.len() > 3 * MAX_HYPOTHESES,
+            "{} anchor pixels",
+            tr.anchor.len()
+        );
+        let (x, y) = pixel_of(&cams[2], p0);
+        let t = tr.track(x, y).expect("tracked");
+        // Silhouettes of one colour do not pin a surface point (any point inside the ball at
+        // every time explains them): what matters is that the transient sits on the ball in
+        // every frame of its life.
+        for &ti in &times {
+            let q: [f32; 3] = std::array::from_fn(|k| t.mean[k] + t.velocity[k] * (ti - 0.2));
+            let c = pos(ti);
+            let d = (0..3).map(|k| (q[k] - c[k]).powi(2)).sum::<f32>().sqrt();
+            assert!(
+                d < 1.2 * r,
+                "at t = {ti}: {q:?} is {d} from the centre {c:?}; {t:?}"
+            );
+        }
     }
 }

@@ -26,6 +26,8 @@ pub struct SpawnReport {
     pub tracked: usize,
     /// Pixels over the error threshold that the budget left out.
     pub over_budget: usize,
+    /// Wall-clock milliseconds the spawn took (renders, read-backs, tracking, upload).
+    pub ms: f64,
 }
 
 impl std::fmt::Display for SpawnReport {
@@ -52,7 +54,7 @@ impl std::fmt::Display for SpawnReport {
         if self.over_budget > 0 {
             write!(f, "; {} pixels left out by the budget", self.over_budget)?;
         }
-        Ok(())
+        write!(f, "; {:.0} ms", self.ms)
     }
 }
 
@@ -243,9 +245,17 @@ pub fn transients_of(
         g.time.push([f.time, tau]);
         g.velocity.push(v);
     };
-    for &(x, y, _) in &px {
+    // Tracking is the spawn's cost (a grid of hypotheses per pixel): the pixels in parallel.
+    let tracks: Vec<Option<crate::train::track::Track>> = match tracker {
+        Some(tr) => {
+            use rayon::prelude::*;
+            px.par_iter().map(|&(x, y, _)| tr.track(x, y)).collect()
+        }
+        None => vec![None; px.len()],
+    };
+    for (&(x, y, _), track) in px.iter().zip(tracks) {
         let c = f.gt[(y * cam.width + x) as usize];
-        if let Some(t) = tracker.and_then(|tr| tr.track(x, y, bounds)) {
+        if let Some(t) = track {
             if g.len() >= room {
                 out.over += 1;
                 continue;
