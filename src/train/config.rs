@@ -362,7 +362,7 @@ impl Default for TransientConfig {
         TransientConfig {
             mode: TransientMode::Off,
             floor_frames: 3.0,
-            init_frames: 3.0,
+            init_frames: 5.0,
             cutoff: 0.01,
             every: 100,
             from: 0.2,
@@ -372,7 +372,7 @@ impl Default for TransientConfig {
             depths: 4,
             track: 2,
             min_error: 0.12,
-            init_opacity: 0.3,
+            init_opacity: 0.7,
             max_share: 0.25,
             lr_centre: 0.002,
             lr_width: 0.01,

@@ -357,6 +357,7 @@ impl<'g> Trainer<'g> {
     /// Spawns transients from the frames with the lowest PSNR at their last step (see
     /// `transients`), within the budget's share for them.
     pub fn spawn_transients(&mut self) -> Result<()> {
+        let started = std::time::Instant::now();
         let tc = self.cfg.transient;
         let g = &self.model.gaussians;
         let cap = g.layout.capacity as usize;
@@ -369,10 +370,12 @@ impl<'g> Trainer<'g> {
         };
         let view = self.view();
         let spacing = self.times.spacing;
-        // Candidates spread over time (rotating each spawn), rendered; the frames with the
-        // largest localized residual spawn.
-        let cands =
-            transients::candidate_frames(self.times.by_time(), 3 * tc.frames as usize, self.spawns);
+        // Candidates spread over the frames the time curriculum trains now (one it has not
+        // reached yet is wrong because it is untrained, not because the canonical model cannot
+        // draw it), rotating each spawn, rendered; those with the largest localized residual
+        // spawn.
+        let window = self.times.window(&self.cfg, self.iteration.max(1));
+        let cands = transients::candidate_frames(window, 3 * tc.frames as usize, self.spawns);
         self.spawns += 1;
         let mut shots = Vec::new();
         for &i in &cands {
@@ -413,7 +416,7 @@ impl<'g> Trainer<'g> {
                     })
                     .collect();
                 let me = Residual::new(&f.camera, f.time, render, gt, tc.min_error);
-                Tracker::new(me, nb, v_max)
+                Tracker::new(me, nb, v_max, &self.bounds)
             });
             let sf = transients::SpawnFrame {
                 camera: &f.camera,
@@ -443,6 +446,7 @@ impl<'g> Trainer<'g> {
         if let Some(s) = self.passes.as_ref() {
             s.densify.clear_stats(self.gpu, first, all.len() as u32)?;
         }
+        report.ms = started.elapsed().as_secs_f64() * 1e3;
         self.last_spawn = Some((self.iteration, report));
         Ok(())
     }

@@ -55,15 +55,23 @@ impl FrameTimes {
     /// whose time ranks lie in the window (centred on the middle rank).
     pub fn pick(&self, cfg: &TrainConfig, it: u32) -> usize {
         let n = self.times.len();
-        let span = curriculum_span(cfg, it, n);
-        if span >= n {
+        let window = self.window(cfg, it);
+        if window.len() >= n {
             return frame_for_iteration(cfg.seed, it, n);
         }
+        window[frame_for_iteration(cfg.seed, it, window.len())]
+    }
+
+    /// The frames (in time order) the time curriculum trains at 1-based iteration `it`: all of
+    /// them once it is over or when it is off.
+    pub fn window(&self, cfg: &TrainConfig, it: u32) -> &[usize] {
+        let n = self.times.len();
+        let span = curriculum_span(cfg, it, n).min(n);
         let lo = match cfg.curriculum.anchor {
             CurriculumAnchor::Middle => (n - span) / 2,
             CurriculumAnchor::First => 0,
         };
-        self.by_time[lo + frame_for_iteration(cfg.seed, it, span)]
+        &self.by_time[lo..lo + span]
     }
 
     /// Frame indices in time order (ties by index).
@@ -659,12 +667,17 @@ mod tests {
             lo == 0.0 && hi == 1.0,
             "all frames once the window is full: {lo} {hi}"
         );
+        // The window the spawn of transients reads is the one `pick` draws from.
+        let times_of = |w: &[usize]| -> Vec<f32> { w.iter().map(|&i| f.times[i]).collect() };
+        assert_eq!(times_of(f.window(&c, 1)), [0.4, 0.45, 0.5, 0.55, 0.6]);
+        assert_eq!(f.window(&c, 51).len(), n);
         c.curriculum.anchor = CurriculumAnchor::First;
         let (lo, hi) = spread(&c, 1..=3);
         assert!(
             lo == 0.0 && hi <= 0.2 + 1e-6,
             "the 5 earliest times: {lo} {hi}"
         );
+        assert_eq!(times_of(f.window(&c, 1)), [0.0, 0.05, 0.1, 0.15, 0.2]);
         c.curriculum.start = 0.0;
         assert_eq!(curriculum_span(&c, 1, n), 2, "at least two instants");
     }
