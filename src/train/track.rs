@@ -369,6 +369,26 @@ mod tests {
 
     const ORANGE: [f32; 4] = [0.9, 0.5, 0.1, 1.0];
 
+    /// The scene's bounds: the cube of side 4 about the origin.
+    fn cube() -> Bounds {
+        Bounds {
+            min: glam::Vec3::splat(-2.0),
+            max: glam::Vec3::splat(2.0),
+        }
+    }
+
+    /// Five cameras around the origin, one per frame.
+    fn five_cameras() -> [Camera; 5] {
+        [
+            [6.0, 0.0, 3.0],
+            [0.0, 6.0, 3.0],
+            [-6.0, 0.5, 3.0],
+            [0.5, -6.0, 3.0],
+            [4.0, 4.0, 4.0],
+        ]
+        .map(look_at)
+    }
+
     /// The pixel `p` projects into.
     fn pixel_of(cam: &Camera, p: [f32; 3]) -> (u32, u32) {
         let q: [f32; 3] = std::array::from_fn(|r| {
@@ -407,20 +427,10 @@ mod tests {
 
     #[test]
     fn a_ball_missing_from_every_frame_is_tracked_with_its_velocity() {
-        let bounds = Bounds {
-            min: glam::Vec3::splat(-2.0),
-            max: glam::Vec3::splat(2.0),
-        };
+        let bounds = cube();
         // Five frames, each from another camera, the ball moving 0.37 per frame (more than
         // its diameter) along a slanted line.
-        let cams = [
-            [6.0, 0.0, 3.0],
-            [0.0, 6.0, 3.0],
-            [-6.0, 0.5, 3.0],
-            [0.5, -6.0, 3.0],
-            [4.0, 4.0, 4.0],
-        ]
-        .map(look_at);
+        let cams = five_cameras();
         let (p0, vel) = ([-0.3f32, 0.2, 0.1], [3.0f32, -1.5, 1.0]);
         let speed = 3.5f32;
         let times: Vec<f32> = (0..5).map(|i| i as f32 * 0.1).collect();
@@ -466,10 +476,7 @@ mod tests {
     fn a_track_keeps_its_colour() {
         // The same motion, but the neighbours' wrong pixels are another colour (a blue ball
         // where the frame's is orange): not one object, no track.
-        let bounds = Bounds {
-            min: glam::Vec3::splat(-2.0),
-            max: glam::Vec3::splat(2.0),
-        };
+        let bounds = cube();
         let cams = [[6.0, 0.0, 3.0], [0.0, 6.0, 3.0], [-6.0, 0.5, 3.0]].map(look_at);
         let p = [0.1f32, -0.2, 0.3];
         let imgs: Vec<_> = (0..3)
@@ -495,18 +502,7 @@ mod tests {
     fn a_big_ball_is_tracked_from_a_strided_subset_of_its_pixels() {
         // A ball whose image in the anchor has several times MAX_HYPOTHESES wrong pixels: the
         // strided hypotheses and the refinement still find a path on it.
-        let bounds = Bounds {
-            min: glam::Vec3::splat(-2.0),
-            max: glam::Vec3::splat(2.0),
-        };
-        let cams = [
-            [6.0, 0.0, 3.0],
-            [0.0, 6.0, 3.0],
-            [-6.0, 0.5, 3.0],
-            [0.5, -6.0, 3.0],
-            [4.0, 4.0, 4.0],
-        ]
-        .map(look_at);
+        let (bounds, cams) = (cube(), five_cameras());
         let (p0, vel, r) = ([-0.3f32, 0.2, 0.1], [3.0f32, -1.5, 1.0], 0.8f32);
         let times: Vec<f32> = (0..5).map(|i| i as f32 * 0.1).collect();
         let pos = |t: f32| -> [f32; 3] { std::array::from_fn(|k| p0[k] + vel[k] * (t - 0.2)) };
