@@ -336,6 +336,9 @@ pub struct TransientConfig {
     pub until: f32,
     pub frames: u32,
     pub pixels: u32,
+    /// Depths along the ray at which a pixel that is not tracked spawns still transients
+    /// (0: an untracked pixel spawns nothing; needs `track` > 0). A wrong-depth transient is
+    /// a floater in every other view.
     pub depths: u32,
     /// Temporal neighbours each side (0: off) whose residuals a wrong pixel is tracked through
     /// (`train::track`): a pixel whose residual a point moving at a constant velocity explains
@@ -345,6 +348,13 @@ pub struct TransientConfig {
     pub min_error: f32,
     /// Opacity of a new transient.
     pub init_opacity: f32,
+    /// Spawn only from a frame whose localized residual is at least this fraction of what it
+    /// was when the frame was last looked at (0: off, spawn on the first look). A residual that
+    /// training is still shrinking (the deformation learning the motion) is left to training;
+    /// one that persists (an object the canonical model cannot draw) spawns. A frame's first
+    /// look only records its residual; with `persist` on, each set of candidate frames is
+    /// looked at by two successive spawns, `every` steps apart.
+    pub persist: f32,
     /// The share of the Gaussian budget kept for transients: the canonical population starts
     /// and densifies within the rest (so a scene whose initial points fill the budget still
     /// has room to spawn), transients spawn and densify within it.
@@ -373,6 +383,7 @@ impl Default for TransientConfig {
             track: 2,
             min_error: 0.12,
             init_opacity: 0.7,
+            persist: 0.0,
             max_share: 0.25,
             lr_centre: 0.002,
             lr_width: 0.01,
@@ -1016,7 +1027,13 @@ impl TrainConfig {
             at_least_1("transient.every", tc.every)?;
             at_least_1("transient.frames", tc.frames)?;
             at_least_1("transient.pixels", tc.pixels)?;
-            at_least_1("transient.depths", tc.depths)?;
+            if tc.depths == 0 && tc.track == 0 {
+                bad(
+                    "transient.depths",
+                    tc.depths,
+                    "at least 1 when transient.track = 0 (else nothing spawns)",
+                )?;
+            }
         }
         for (field, v) in [
             ("transient.floor_frames", tc.floor_frames),
@@ -1030,6 +1047,7 @@ impl TrainConfig {
         unit("transient.from", tc.from as f64)?;
         unit("transient.until", tc.until as f64)?;
         unit("transient.max_share", tc.max_share as f64)?;
+        unit("transient.persist", tc.persist as f64)?;
         unit("transient.init_opacity", tc.init_opacity as f64)?;
         if !(tc.init_opacity > 0.0 && tc.init_opacity < 1.0) {
             bad(
@@ -1142,5 +1160,25 @@ mod tests {
                 p
             );
         }
+    }
+
+    #[test]
+    fn transient_knobs_are_checked() {
+        let mut c = TrainConfig::fast();
+        c.transient.mode = TransientMode::On;
+        c.transient.depths = 0;
+        c.validate()
+            .expect("depths 0 with tracking: untracked pixels spawn nothing");
+        c.transient.track = 0;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("transient.depths = 0"), "{e}");
+        c.transient.track = 2;
+        for bad in [-0.1f32, 1.5, f32::NAN] {
+            c.transient.persist = bad;
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains("transient.persist"), "{bad}: {e}");
+        }
+        c.transient.persist = 0.8;
+        c.validate().unwrap();
     }
 }

@@ -107,8 +107,8 @@ pub struct Trainer<'g> {
     bounds: crate::data::Bounds,
     /// The last spawn of transients and its iteration.
     pub last_spawn: Option<(u32, transients::SpawnReport)>,
-    /// Spawns done (rotates the candidate frames).
-    spawns: usize,
+    /// Which frames spawns looked at and what they saw.
+    looks: transients::Looks,
 }
 
 /// The temporal stage's constants for training frames `train`: σ's floor in time units
@@ -201,7 +201,7 @@ impl<'g> Trainer<'g> {
             deform_lr_scale: 1.0,
             bounds: data.bounds,
             last_spawn: None,
-            spawns: 0,
+            looks: Default::default(),
         })
     }
 
@@ -364,6 +364,13 @@ impl<'g> Trainer<'g> {
         let share = (tc.max_share as f64 * cap as f64) as usize;
         let room = (cap - g.n as usize).min(share.saturating_sub(g.transients as usize));
         let mut report = transients::SpawnReport::default();
+        if room == 0 {
+            // Nothing could be added: skip the renders and the tracking.
+            report.full = true;
+            report.ms = started.elapsed().as_secs_f64() * 1e3;
+            self.last_spawn = Some((self.iteration, report));
+            return Ok(());
+        }
         let mut all = HostGaussians {
             sh_coeffs: g.layout.sh_coeffs,
             ..Default::default()
@@ -375,8 +382,9 @@ impl<'g> Trainer<'g> {
         // draw it), rotating each spawn, rendered; those with the largest localized residual
         // spawn.
         let window = self.times.window(&self.cfg, self.iteration.max(1));
-        let cands = transients::candidate_frames(window, 3 * tc.frames as usize, self.spawns);
-        self.spawns += 1;
+        let cands = self
+            .looks
+            .candidates(window, 3 * tc.frames as usize, tc.persist);
         let mut shots = Vec::new();
         for &i in &cands {
             let Some((render, gt)) = self.shot(i, view)? else {
@@ -386,6 +394,17 @@ impl<'g> Trainer<'g> {
             shots.push((r, i, render, gt));
         }
         report.looked_at = shots.len();
+        shots.retain(|s| match self.looks.judge(s.1, s.0, tc.persist) {
+            transients::Verdict::Spawn => true,
+            transients::Verdict::FirstLook => {
+                report.first_looks += 1;
+                false
+            }
+            transients::Verdict::Improving => {
+                report.improving += 1;
+                false
+            }
+        });
         shots.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         shots.truncate(tc.frames as usize);
         shots.retain(|s| s.0 > 0.0);

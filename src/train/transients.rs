@@ -28,10 +28,23 @@ pub struct SpawnReport {
     pub over_budget: usize,
     /// Wall-clock milliseconds the spawn took (renders, read-backs, tracking, upload).
     pub ms: f64,
+    /// The transients' share of the budget was full: nothing was rendered.
+    pub full: bool,
+    /// Frames left to training because their residual shrank since their last look, and
+    /// frames looked at for the first time (`transient.persist`).
+    pub improving: usize,
+    pub first_looks: usize,
 }
 
 impl std::fmt::Display for SpawnReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.full {
+            return write!(
+                f,
+                "none: the transients' share of the budget is full; {:.0} ms",
+                self.ms
+            );
+        }
         let frames: Vec<String> = self
             .frames
             .iter()
@@ -51,10 +64,64 @@ impl std::fmt::Display for SpawnReport {
         if self.tracked > 0 {
             write!(f, "; {} pixels tracked", self.tracked)?;
         }
+        if self.improving > 0 {
+            write!(f, "; {} improving frames left to training", self.improving)?;
+        }
+        if self.first_looks > 0 {
+            write!(f, "; {} frames looked at first", self.first_looks)?;
+        }
         if self.over_budget > 0 {
             write!(f, "; {} pixels left out by the budget", self.over_budget)?;
         }
         write!(f, "; {:.0} ms", self.ms)
+    }
+}
+
+/// Which training frames the spawns look at, and each frame's localized residual at its last
+/// look (`transient.persist`).
+#[derive(Clone, Debug, Default)]
+pub struct Looks {
+    /// Candidate sets drawn (rotates them).
+    rounds: usize,
+    /// The candidates the next spawn looks at again.
+    recheck: Option<Vec<usize>>,
+    last: std::collections::HashMap<usize, f64>,
+}
+
+/// What a look at a frame's residual decides (`transient.persist`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    Spawn,
+    /// Not looked at before: the residual is recorded only.
+    FirstLook,
+    /// Shrank since the last look: left to training.
+    Improving,
+}
+
+impl Looks {
+    /// The next spawn's `k` candidates from `window` (training frames in time order), rotating;
+    /// with `persist` on, every set is looked at by two successive spawns, so each residual is
+    /// compared with itself `every` steps apart (a whole rotation can be longer than the run).
+    /// Only a frame looked at before can spawn then, so the first spawn of each pair spawns
+    /// from none of a set new to the run: about half as many spawns.
+    pub fn candidates(&mut self, window: &[usize], k: usize, persist: f32) -> Vec<usize> {
+        if let Some(c) = self.recheck.take() {
+            return c;
+        }
+        let c = candidate_frames(window, k, self.rounds);
+        self.rounds += 1;
+        self.recheck = (persist > 0.0).then(|| c.clone());
+        c
+    }
+
+    /// Records `frame`'s residual `now` and judges it ([`persists`]).
+    pub fn judge(&mut self, frame: usize, now: f64, persist: f32) -> Verdict {
+        let last = self.last.insert(frame, now);
+        match (persists(now, last, persist), last) {
+            (true, _) => Verdict::Spawn,
+            (false, None) => Verdict::FirstLook,
+            (false, Some(_)) => Verdict::Improving,
+        }
     }
 }
 
@@ -70,6 +137,16 @@ pub fn candidate_frames(by_time: &[usize], k: usize, round: usize) -> Vec<usize>
     let stride = n / k;
     let offset = round % stride.max(1);
     (0..k).map(|j| by_time[(j * stride + offset) % n]).collect()
+}
+
+/// Whether a frame whose localized residual is `now` (and was `last` when a spawn last looked
+/// at it) may spawn under `transient.persist` = `persist`: always when 0; otherwise only when it
+/// was looked at before and kept at least `persist` of that residual (training is not fixing it).
+pub fn persists(now: f64, last: Option<f64>, persist: f32) -> bool {
+    if persist <= 0.0 {
+        return true;
+    }
+    last.is_some_and(|l| now >= persist as f64 * l)
 }
 
 /// The localized residual of a render: the summed error of the pixels that [`worst_pixels`]
@@ -224,7 +301,7 @@ pub fn transients_of(
         sh_coeffs,
         ..Default::default()
     };
-    let k = cfg.depths.max(1) as usize;
+    let k = cfg.depths as usize;
     let tau = (cfg.init_frames.max(cfg.floor_frames) * spacing)
         .max(1e-6)
         .ln();
@@ -314,6 +391,75 @@ mod tests {
         assert!((local_residual(&r, &gt, 0.1) - 1.5).abs() < 1e-6);
         // Wrong everywhere alike: nothing local.
         assert_eq!(local_residual(&vec![[0.5f32; 4]; 100], &gt, 0.1), 0.0);
+    }
+
+    #[test]
+    fn only_a_residual_that_training_does_not_shrink_spawns() {
+        assert!(persists(5.0, None, 0.0), "off: the first look spawns");
+        assert!(
+            persists(1.0, Some(9.0), 0.0),
+            "off: a shrinking residual spawns"
+        );
+        assert!(!persists(5.0, None, 0.8), "on: the first look only records");
+        assert!(
+            persists(8.5, Some(10.0), 0.8),
+            "shrank by less than a fifth"
+        );
+        assert!(persists(12.0, Some(10.0), 0.8), "a growing residual spawns");
+        assert!(
+            !persists(7.9, Some(10.0), 0.8),
+            "shrank by more than a fifth"
+        );
+    }
+
+    #[test]
+    fn with_persist_each_candidate_set_is_looked_at_twice() {
+        let by_time: Vec<usize> = (0..12).collect();
+        let mut off = Looks::default();
+        assert_eq!(off.candidates(&by_time, 4, 0.0), vec![0, 3, 6, 9]);
+        assert_eq!(off.candidates(&by_time, 4, 0.0), vec![1, 4, 7, 10]);
+        let mut on = Looks::default();
+        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![0, 3, 6, 9]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![0, 3, 6, 9]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![1, 4, 7, 10]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![1, 4, 7, 10]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![2, 5, 8, 11]);
+        // Frame 3: the first look records, a held residual spawns, a shrunk one does not.
+        assert_eq!(on.judge(3, 10.0, 0.8), Verdict::FirstLook);
+        assert_eq!(on.judge(3, 9.0, 0.8), Verdict::Spawn);
+        assert_eq!(on.judge(3, 5.0, 0.8), Verdict::Improving);
+        assert_eq!(
+            on.judge(3, 4.5, 0.8),
+            Verdict::Spawn,
+            "compared with the last look, not the first"
+        );
+        assert_eq!(off.judge(3, 1.0, 0.0), Verdict::Spawn);
+    }
+
+    #[test]
+    fn a_full_budget_says_so() {
+        let full = SpawnReport {
+            full: true,
+            ms: 0.2,
+            ..Default::default()
+        };
+        assert_eq!(
+            full.to_string(),
+            "none: the transients' share of the budget is full; 0 ms"
+        );
+        let some = SpawnReport {
+            frames: vec![("r_003".into(), 12.5, 64)],
+            looked_at: 12,
+            spawned: 64,
+            improving: 5,
+            ms: 41.0,
+            ..Default::default()
+        };
+        assert_eq!(
+            some.to_string(),
+            "64 transients from r_003 (residual 12.5, 64 px) of 12 frames looked at; \
+             5 improving frames left to training; 41 ms"
+        );
     }
 
     #[test]
