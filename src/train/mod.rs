@@ -366,6 +366,7 @@ impl<'g> Trainer<'g> {
         let mut report = transients::SpawnReport::default();
         if room == 0 {
             // Nothing could be added: skip the renders and the tracking.
+            self.looks.skip();
             report.full = true;
             report.ms = started.elapsed().as_secs_f64() * 1e3;
             self.last_spawn = Some((self.iteration, report));

@@ -114,6 +114,14 @@ impl Looks {
         c
     }
 
+    /// A spawn that looks at nothing (the transients' share is full) still takes its turn: the
+    /// pending second look, else a new set, so the rotation goes on as if it had looked.
+    pub fn skip(&mut self) {
+        if self.recheck.take().is_none() {
+            self.rounds += 1;
+        }
+    }
+
     /// Records `frame`'s residual `now` and judges it ([`persists`]).
     pub fn judge(&mut self, frame: usize, now: f64, persist: f32) -> Verdict {
         let last = self.last.insert(frame, now);
@@ -434,6 +442,21 @@ mod tests {
             "compared with the last look, not the first"
         );
         assert_eq!(off.judge(3, 1.0, 0.0), Verdict::Spawn);
+    }
+
+    #[test]
+    fn a_skipped_spawn_takes_its_turn() {
+        let by_time: Vec<usize> = (0..12).collect();
+        let mut on = Looks::default();
+        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![0, 3, 6, 9]);
+        on.skip(); // the second look at {0, 3, 6, 9}
+        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![1, 4, 7, 10]);
+        on.skip(); // ditto
+        on.skip(); // a new set: {2, 5, 8, 11}
+        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![0, 3, 6, 9]);
+        let mut off = Looks::default();
+        off.skip();
+        assert_eq!(off.candidates(&by_time, 4, 0.0), vec![1, 4, 7, 10]);
     }
 
     #[test]
