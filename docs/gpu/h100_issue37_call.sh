@@ -1,5 +1,5 @@
 #!/bin/bash
-# Issue 37 device calls (H100, 2026-11-26): tracked transients against off, two seeds. Call 1 read jobs1 (h100_issue37_call1_jobs.txt) with the defaults; call 2 ran `JOBS=.bin/jobs2.txt T_JOBS=290 T_JOB=285 BENCH=0 GIFS=bi-seqon-1800-s0` on the binary with the hypothesis cap, parallel tracking and the new init defaults. Configs: docs/gpu/issue37_cfg (were .bin/cfg).
+# Issue 37 device call: tracked transients vs off, two seeds, GPU targets. Not committed as is (docs/gpu gets a copy).
 cd "$(dirname "$0")/.."
 ROOT=$PWD; L=$OUT/log.txt
 for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig
@@ -18,7 +18,7 @@ sed "s|CFG/|$C/|g" ${JOBS:-.bin/jobs1.txt} >/tmp/jobs.txt
 # the built-in scene is generated once into the cache: do it before the parallel jobs
 timeout 60 $B train --preset fast --iterations 1 --out /tmp/warm >/dev/null 2>&1
 echo "start ${SECONDS}s" >>$L
-timeout ${T_JOBS:-370} xargs -P 8 -L 1 bash -c 'one "$@"' _ </tmp/jobs.txt
+timeout ${T_JOBS:-370} xargs -P ${P:-8} -L 1 bash -c 'one "$@"' _ </tmp/jobs.txt
 echo "jobs done ${SECONDS}s" >>$L
 for f in runs/*.log; do echo "$f spawn ms: $(grep -o '[0-9]* ms$' $f | sort -n | awk '{a[NR]=$1} END {if (NR) print NR, "spawns, median", a[int((NR+1)/2)], "max", a[NR]}')"; done >>$L
 for r in ${GIFS:-bi-seqon-1800-s0 bi-seqoff-1800-s0}; do
