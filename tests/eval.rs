@@ -502,3 +502,38 @@ fn check_sequence_zip(ply_dir: &Path, frames: usize) {
         assert_eq!(data, std::fs::read(ply_dir.join(name)).unwrap());
     }
 }
+
+/// Evaluation renders on the colour the ground truth was composited on: with `--background
+/// white` it drew on black, so every test PSNR, probe (the collapse guard) and spawn compared a
+/// black render with white-composited images.
+#[test]
+fn evaluation_renders_on_the_datasets_background() {
+    use dispflow_vk::train::config::Background;
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let gpu = testing::gpu();
+    let dir = tiny_scene(tmp.path());
+    for (bg, colour) in [(Background::Black, 0.0f32), (Background::White, 1.0)] {
+        let mut cfg = train_common::tiny_config(1);
+        cfg.background = bg;
+        let opts = dispflow_vk::data::LoadOptions {
+            progress: false,
+            ..cfg.load_options()
+        };
+        let ds = dispflow_vk::data::load(&dir, &opts).unwrap();
+        let mut tr = dispflow_vk::train::Trainer::new(&gpu, &cfg, &ds).unwrap();
+        // Nothing drawn: every Gaussian fully transparent.
+        let g = &tr.model.gaussians;
+        let mut host = g.download(&gpu).unwrap();
+        host.opacity.iter_mut().for_each(|o| *o = -40.0);
+        host.upload(&gpu, &g.layout, &g.params).unwrap();
+        let e = tr.evaluate_one(0, true).unwrap();
+        let im = e.images.expect("images asked for");
+        assert!(
+            im.render
+                .iter()
+                .all(|p| p[..3].iter().all(|&c| (c - colour).abs() < 1e-5)),
+            "{bg:?}: the empty render is not the dataset's background {colour}"
+        );
+    }
+}

@@ -413,7 +413,7 @@ impl Probe {
         let (model, opts) = (
             &tr.model,
             RenderOpts {
-                background: [0.0; 3],
+                background: tr.background,
                 alpha_max: ALPHA_MAX,
                 abs_grad: false,
             },

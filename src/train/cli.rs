@@ -65,7 +65,9 @@ pub struct TrainArgs {
     /// Most Gaussians the run may hold [preset: paper 500000, fast 20000].
     #[arg(long)]
     pub budget: Option<u32>,
-    /// Background used in training [default: black].
+    /// Background of transparent images and of the render [default: black]. black / white: the
+    /// images are composited on it and training, evaluation, probes and spawns render on it;
+    /// random: a random colour per training step, black in evaluation.
     #[arg(long, value_enum)]
     pub background: Option<Background>,
     /// Seed of everything random (initial points, frame order, MLP init) [default: 0].

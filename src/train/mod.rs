@@ -105,6 +105,9 @@ pub struct Trainer<'g> {
     pub deform_lr_scale: f64,
     /// The scene's bounds and the near distance (where spawned transients may lie).
     bounds: crate::data::Bounds,
+    /// The colour the dataset's images were composited on: evaluation, probes, spawns' shots
+    /// and the signal render on it (training's own background is the plan's).
+    pub background: [f32; 3],
     /// The last spawn of transients and its iteration.
     pub last_spawn: Option<(u32, transients::SpawnReport)>,
     /// Which frames spawns looked at and what they saw.
@@ -200,6 +203,7 @@ impl<'g> Trainer<'g> {
             init_report,
             deform_lr_scale: 1.0,
             bounds: data.bounds,
+            background: data.background,
             last_spawn: None,
             looks: Default::default(),
         })
@@ -522,7 +526,8 @@ impl<'g> Trainer<'g> {
                 &self.sizes,
                 self.cfg.scene_motion.flow_config(&self.cfg.flow_preset)?,
                 self.cfg.lambda_ssim,
-            )?;
+            )?
+            .on_background(self.background);
             self.eval = Some(e);
         }
         Ok(self.eval.as_mut().expect("just built"))

@@ -132,6 +132,9 @@ pub struct Evaluator {
     /// Overflow of the full render (slot 0) and the frozen one (slot 1).
     watch: OverflowWatch,
     lambda_ssim: f32,
+    /// The colour the ground truth was composited on (the dataset's background): what a
+    /// render must show where nothing is drawn for the scores to compare like with like.
+    background: [f32; 3],
 }
 
 impl Evaluator {
@@ -166,11 +169,19 @@ impl Evaluator {
             metrics,
             watch: OverflowWatch::new(gpu, "eval overflow flags", 2)?,
             lambda_ssim,
+            background: [0.0; 3],
         })
     }
 
-    /// Evaluates test frame `f` at its view and time (black background): photometric values;
-    /// with a predecessor time `t−1`, the displacement flow δ = dx(t) − dx(t−1) splatted with
+    /// Renders on `background` (the colour the dataset's images were composited on; black
+    /// until set).
+    pub fn on_background(mut self, background: [f32; 3]) -> Self {
+        self.background = background;
+        self
+    }
+
+    /// Evaluates test frame `f` at its view and time (on the dataset's background): photometric
+    /// values; with a predecessor time `t−1`, the displacement flow δ = dx(t) − dx(t−1) splatted with
     /// the weights of the render at (v, t), min-max normalised, scored against the mask (AP)
     /// and by DRC against the frozen render (v, D(t−1)), plus the optical flow frozen → ground
     /// truth scored the same way.
@@ -203,7 +214,7 @@ impl Evaluator {
         self.evaluate(gpu, model, view, Shot::of_frame(f, None), false)
     }
 
-    /// Renders `(camera, t)` (black background) and, with `prev`, the displacement flow since
+    /// Renders `(camera, t)` (on the dataset's background) and, with `prev`, the displacement flow since
     /// `prev` (no scores: no ground truth).
     #[allow(clippy::too_many_arguments)] // the view's parts, each one named
     pub fn view(
@@ -297,7 +308,7 @@ impl Evaluator {
             )?;
         }
         let opts = RenderOpts {
-            background: [0.0; 3],
+            background: self.background,
             alpha_max: ALPHA_MAX,
             abs_grad: false,
         };
@@ -426,7 +437,7 @@ impl Evaluator {
         } = v;
         let g = &model.gaussians;
         let opts = RenderOpts {
-            background: [0.0; 3],
+            background: self.background,
             alpha_max: ALPHA_MAX,
             abs_grad: false,
         };
