@@ -98,6 +98,34 @@ fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
 }
 
 #[test]
+fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full() {
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    // No reserved share at all: the canonical population leaves rows free, so spawns use them.
+    let mut c = cfg();
+    c.transient.max_share = 0.0;
+    c.densify.until = 0; // keep the canonical count where initialisation put it
+    let first_spawn = |cfg: &TrainConfig| {
+        let mut tr = Trainer::new(&gpu, cfg, &ds).unwrap();
+        while tr.last_spawn.is_none() {
+            tr.step(false, false).unwrap();
+        }
+        let (_, s) = tr.last_spawn.clone().unwrap();
+        (s, tr.model.gaussians.n, tr.model.gaussians.transients)
+    };
+    let (s, n, transients) = first_spawn(&c);
+    assert!(n < c.densify.budget, "{n} of {}", c.densify.budget);
+    assert!(!s.full && s.spawned > 0 && transients as usize == s.spawned, "{s}");
+    // A budget the initial points fill: nothing to spawn into, and the spawn says so.
+    c.densify.budget = n - transients;
+    let (s, n, transients) = first_spawn(&c);
+    assert!(s.full && s.spawned == 0 && transients == 0, "{s}");
+    assert_eq!(n, c.densify.budget);
+}
+
+#[test]
 fn a_transient_run_writes_reopens_and_exports_its_transients() {
     let tmp = tempfile::tempdir().unwrap();
     let scene = tiny_scene(tmp.path());

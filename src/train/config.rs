@@ -358,9 +358,8 @@ pub struct TransientConfig {
     pub persist: f32,
     /// The share of the Gaussian budget kept for transients: the canonical population starts
     /// and densifies within the rest (so a scene whose initial points fill the budget still
-    /// has room to spawn), transients spawn within it. Densification grows both populations
-    /// up to the whole budget less the share's free rows, so transients can outgrow the share
-    /// by cloning and splitting into rows the canonical population does not use.
+    /// has room to spawn). A reservation, not a ceiling: transients spawn, clone and split
+    /// into any free row, those the canonical population leaves unused included.
     pub max_share: f32,
     /// Learning rates of the time centre (time units), of the log-width, and of the velocity
     /// as a multiple of the position rate per σ floor (a transient then moves about as far

@@ -359,14 +359,16 @@ impl<'g> Trainer<'g> {
     }
 
     /// Spawns transients from the frames with the lowest PSNR at their last step (see
-    /// `transients`), within the budget's share for them.
+    /// `transients`), into any free row of the budget.
     pub fn spawn_transients(&mut self) -> Result<()> {
         let started = std::time::Instant::now();
         let tc = self.cfg.transient;
         let g = &self.model.gaussians;
         let cap = g.layout.capacity as usize;
-        let share = (tc.max_share as f64 * cap as f64) as usize;
-        let room = (cap - g.n as usize).min(share.saturating_sub(g.transients as usize));
+        // The share is the transients' reservation, not their ceiling: the canonical
+        // population never grows into it, and rows it leaves free are the transients' too
+        // (densification already grows them into those).
+        let room = cap - g.n as usize;
         let mut report = transients::SpawnReport::default();
         if room == 0 {
             // Nothing could be added: skip the renders and the tracking.

@@ -28,7 +28,7 @@ pub struct SpawnReport {
     pub over_budget: usize,
     /// Wall-clock milliseconds the spawn took (renders, read-backs, tracking, upload).
     pub ms: f64,
-    /// The transients' share of the budget was full: nothing was rendered.
+    /// The Gaussian budget was full: nothing was rendered.
     pub full: bool,
     /// Frames left to training because their residual shrank since their last look, and
     /// frames looked at for the first time (`transient.persist`).
@@ -39,11 +39,7 @@ pub struct SpawnReport {
 impl std::fmt::Display for SpawnReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if self.full {
-            return write!(
-                f,
-                "none: the transients' share of the budget is full; {:.0} ms",
-                self.ms
-            );
+            return write!(f, "none: the Gaussian budget is full; {:.0} ms", self.ms);
         }
         let frames: Vec<String> = self
             .frames
@@ -114,7 +110,7 @@ impl Looks {
         c
     }
 
-    /// A spawn that looks at nothing (the transients' share is full) still takes its turn: the
+    /// A spawn that looks at nothing (the budget is full) still takes its turn: the
     /// pending second look, else a new set, so the rotation goes on as if it had looked.
     pub fn skip(&mut self) {
         if self.recheck.take().is_none() {
@@ -466,10 +462,7 @@ mod tests {
             ms: 0.2,
             ..Default::default()
         };
-        assert_eq!(
-            full.to_string(),
-            "none: the transients' share of the budget is full; 0 ms"
-        );
+        assert_eq!(full.to_string(), "none: the Gaussian budget is full; 0 ms");
         let some = SpawnReport {
             frames: vec![("r_003".into(), 12.5, 64)],
             looked_at: 12,
