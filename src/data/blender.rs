@@ -173,8 +173,11 @@ pub fn read_transforms(dir: &Path, split: &str) -> DataResult<Vec<BlenderFrame>>
     Ok(out)
 }
 
-fn load_frame(f: &BlenderFrame, time: f32, opts: &LoadOptions) -> DataResult<(Frame, u32)> {
-    let image = img::load_rgb(&f.image, opts.background)?;
+/// A loaded frame, the downscale factor and its transparent fraction (RGBA images).
+type Loaded = (Frame, u32, Option<f32>);
+
+fn load_frame(f: &BlenderFrame, time: f32, opts: &LoadOptions) -> DataResult<Loaded> {
+    let (image, clear) = img::load_rgb_alpha(&f.image, opts.background)?;
     let (w, h) = (image.width, image.height);
     for (want, got, name) in [(f.wh.0, w, "w"), (f.wh.1, h, "h")] {
         if let Some(want) = want {
@@ -244,8 +247,40 @@ fn load_frame(f: &BlenderFrame, time: f32, opts: &LoadOptions) -> DataResult<(Fr
         mask: mask.map(|m| if keep { m } else { Vec::new() }),
         flow: None,
     };
-    Ok((frame, factor))
+    Ok((frame, factor, clear))
 }
+
+/// Views that are almost all transparent beside views that are mostly opaque, as mujoco-scene5's:
+/// its floor is transparent from the camera above (98 % of the pixels) and opaque from the
+/// side (22 % transparent at least). A surface transparent in some views is drawn in the
+/// background colour there and its own colour elsewhere; the model then builds a layer of
+/// background-coloured Gaussians over it, which hides what moves below from the clear views.
+/// D-NeRF's objects on a transparent background do not trip it (every view mostly clear).
+pub fn transparency_warning(clear: &[(&str, f32)], background: [f32; 3]) -> Option<String> {
+    let most = clear.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    let least = clear.iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+    (most.1 >= CLEAR_VIEW && least.1 <= OPAQUE_VIEW).then(|| {
+        format!(
+            "views disagree about what is transparent: {} is {:.0} % transparent, {} only {:.0} %; \
+             a surface that some views see through (a floor) is drawn in the background colour \
+             ({}) there and the model may hide what is under it from those views; if that \
+             surface has one colour, train with it as --background (white for a white floor)",
+            most.0,
+            100.0 * most.1,
+            least.0,
+            100.0 * least.1,
+            match background {
+                [0.0, 0.0, 0.0] => "black".to_string(),
+                [1.0, 1.0, 1.0] => "white".to_string(),
+                [r, g, b] => format!("{r}, {g}, {b}"),
+            }
+        )
+    })
+}
+
+/// A view at least this transparent beside one at most [`OPAQUE_VIEW`] transparent.
+const CLEAR_VIEW: f32 = 0.9;
+const OPAQUE_VIEW: f32 = 0.3;
 
 /// The validation split used: `test` when `transforms_test.json` exists, else `val`, else none.
 pub fn val_split_name(dir: &Path) -> Option<&'static str> {
@@ -297,7 +332,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> DataResult<Dataset> {
     }
 
     let pb = progress_bar(all.len() as u64, "loading frames", opts.progress);
-    let load_all = |frames: &[BlenderFrame]| -> DataResult<Vec<(Frame, u32)>> {
+    let load_all = |frames: &[BlenderFrame]| -> DataResult<Vec<Loaded>> {
         frames
             .par_iter()
             .map(|f| {
@@ -311,6 +346,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> DataResult<Dataset> {
     let val_frames = load_all(&val)?;
     pb.finish_and_clear();
     let downscale = train_frames.first().map(|f| f.1).unwrap_or(1);
+    let clear: Vec<(&str, f32)> = (train_frames.iter().chain(&val_frames))
+        .filter_map(|f| f.2.map(|c| (f.0.id.as_str(), c)))
+        .collect();
+    warnings.extend(transparency_warning(&clear, opts.background));
     let train_frames: Vec<Frame> = train_frames.into_iter().map(|f| f.0).collect();
     let val_frames: Vec<Frame> = val_frames.into_iter().map(|f| f.0).collect();
 
@@ -394,4 +433,25 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> DataResult<Dataset> {
         warnings,
         notes,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::transparency_warning;
+
+    #[test]
+    fn views_that_disagree_about_transparency_are_named() {
+        let bg = [0.0; 3];
+        // mujoco-scene5: the camera above sees through the floor, a 45° one does not.
+        let w = transparency_warning(&[("r_0002", 0.977), ("r_0003", 0.224)], bg).unwrap();
+        assert!(
+            w.contains("r_0002 is 98 %") && w.contains("r_0003 only 22 %"),
+            "{w}"
+        );
+        // An object on a transparent background (D-NeRF) or a floor opaque from every view
+        // (mujoco-scene7), or no RGBA frame at all: nothing to say.
+        assert_eq!(transparency_warning(&[("a", 0.95), ("b", 0.62)], bg), None);
+        assert_eq!(transparency_warning(&[("a", 0.45), ("b", 0.005)], bg), None);
+        assert_eq!(transparency_warning(&[], bg), None);
+    }
 }

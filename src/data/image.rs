@@ -43,22 +43,34 @@ pub(crate) fn decode(path: &Path) -> DataResult<image::DynamicImage> {
 
 /// Loads a PNG as RGB; RGBA is composited over `background` (`c·a + bg·(1−a)`).
 pub(crate) fn load_rgb(path: &Path, background: [f32; 3]) -> DataResult<Image> {
+    Ok(load_rgb_alpha(path, background)?.0)
+}
+
+/// [`load_rgb`], with the fraction of pixels under half opacity when the PNG has alpha.
+pub(crate) fn load_rgb_alpha(
+    path: &Path,
+    background: [f32; 3],
+) -> DataResult<(Image, Option<f32>)> {
     let img = decode(path)?;
     let (width, height) = (img.width(), img.height());
     let has_alpha = img.color().has_alpha();
     let rgba = img.into_rgba32f();
     let mut data = Vec::with_capacity(width as usize * height as usize * 3);
+    let mut clear = 0usize;
     for p in rgba.pixels() {
         let a = if has_alpha { p[3].clamp(0.0, 1.0) } else { 1.0 };
+        clear += usize::from(a < 0.5);
         for c in 0..3 {
             data.push(p[c].clamp(0.0, 1.0) * a + background[c] * (1.0 - a));
         }
     }
-    Ok(Image {
+    let clear = has_alpha.then(|| clear as f32 / (width as f32 * height as f32).max(1.0));
+    let image = Image {
         width,
         height,
         data,
-    })
+    };
+    Ok((image, clear))
 }
 
 /// Loads a PNG as 8-bit grey (the first channel for colour images): `(width, height, values)`.

@@ -119,6 +119,10 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
 pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> Result<Report> {
     let dataset = data::load(&spec.data_dir, &spec.cfg.load_options())?;
     progress.note(&format!("device: {}", gpu.info));
+    // The loader's warnings were only in `data check`; a run that trains on them says so.
+    for w in &dataset.warnings {
+        progress.note(&format!("warning: {w}"));
+    }
     let mut tr = open_trainer(gpu, spec, &dataset)?;
     progress.note(&tr.init_report.to_string());
     let ckpt = last_checkpoint(&spec.out);
