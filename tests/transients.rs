@@ -117,7 +117,10 @@ fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full()
     };
     let (s, n, transients) = first_spawn(&c);
     assert!(n < c.densify.budget, "{n} of {}", c.densify.budget);
-    assert!(!s.full && s.spawned > 0 && transients as usize == s.spawned, "{s}");
+    assert!(
+        !s.full && s.spawned > 0 && transients as usize == s.spawned,
+        "{s}"
+    );
     // A budget the initial points fill: nothing to spawn into, and the spawn says so.
     c.densify.budget = n - transients;
     let (s, n, transients) = first_spawn(&c);
