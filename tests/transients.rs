@@ -110,6 +110,7 @@ fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full()
     let first_spawn = |cfg: &TrainConfig| {
         let mut tr = Trainer::new(&gpu, cfg, &ds).unwrap();
         while tr.last_spawn.is_none() {
+            assert!(tr.iteration < cfg.iterations, "no spawn in the whole run");
             tr.step(false, false).unwrap();
         }
         let (_, s) = tr.last_spawn.clone().unwrap();
