@@ -159,6 +159,26 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
         m["num_gaussians"].as_u64().unwrap()
     );
     assert!(out.join("transients.ply").is_file());
+    // What each population costs: the timed log steps' GPU time, attributed without a gap.
+    let c = &m["cost_per_step"];
+    assert!(c["sampled_steps"].as_u64().unwrap() > 0, "{c}");
+    let pops = c["populations"].as_array().unwrap();
+    let names: Vec<&str> = pops
+        .iter()
+        .map(|p| p["population"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["static", "deforming", "transient"]);
+    let ms: f64 = pops.iter().map(|p| p["ms"].as_f64().unwrap()).sum();
+    let all = c["gpu_ms"].as_f64().unwrap();
+    assert!(pops.iter().all(|p| p["ms"].as_f64().unwrap() >= 0.0), "{c}");
+    assert!((ms + c["per_pixel_ms"].as_f64().unwrap() - all).abs() < 1e-6 * all.max(1.0));
+    // Some transient was alive at a timed step after the first spawn, never more than held.
+    let alive = pops[2]["rows"].as_f64().unwrap();
+    assert!(
+        alive > 0.0 && alive <= c["transient_rows"].as_f64().unwrap(),
+        "{c}"
+    );
+    assert!(stderr.contains("GPU ms per step by population"), "{stderr}");
     // eval reopens point_cloud.ply + transients.ply and scores the same model.
     let o = std::process::Command::new(bin)
         .env("LP_NUM_THREADS", "1")

@@ -86,6 +86,11 @@ pub struct Report {
     pub gaussians_canonical: Option<u32>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gaussians_transient: Option<u32>,
+    /// GPU ms per step by population (`train` only): static, deforming and transient rows
+    /// drawn and what each costs, from the steps timed at the log lines of this launch
+    /// (`train::cost`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cost_per_step: Option<crate::train::cost::PopulationCost>,
     pub per_frame: Vec<FrameEval>,
 }
 
@@ -150,6 +155,7 @@ impl Report {
             rollbacks: 0,
             gaussians_canonical: None,
             gaussians_transient: None,
+            cost_per_step: None,
             per_frame: per,
         }
     }

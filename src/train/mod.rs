@@ -10,6 +10,7 @@ pub mod checkpoint;
 pub mod cli;
 pub mod collapse;
 pub mod config;
+pub mod cost;
 pub mod curve;
 pub mod frames;
 pub mod guard;
@@ -71,6 +72,8 @@ pub struct StepLog {
     pub loss: LossValues,
     pub num_gaussians: u32,
     pub timings: Timings,
+    /// The rows the step drew, by population (timed steps only).
+    pub rows: Option<cost::Rows>,
 }
 
 impl Default for LossValues {
@@ -294,6 +297,12 @@ impl<'g> Trainer<'g> {
             if again {
                 continue;
             }
+            // Before densification and spawning change the rows.
+            let rows = if timed {
+                Some(self.rows_drawn(&p)?)
+            } else {
+                None
+            };
             self.iteration = p.iteration;
             self.last_plan = Some(p);
             self.densify_if_due(&p)?;
@@ -309,6 +318,7 @@ impl<'g> Trainer<'g> {
                     loss: self.passes.as_ref().expect("built").loss.values(),
                     num_gaussians: self.n(),
                     timings,
+                    rows,
                 })
             } else {
                 None
@@ -501,6 +511,36 @@ impl<'g> Trainer<'g> {
         let stats = c.classify(self.gpu, &mut self.model, &s.deform)?;
         self.last_split = Some((self.iteration, stats));
         Ok(Some(stats))
+    }
+
+    /// The rows step `p` drew, by population, read after its submit (the transients' opacity
+    /// factors at its time: the culled ones cost nothing after the temporal stage).
+    fn rows_drawn(&self, p: &StepPlan) -> Result<cost::Rows> {
+        let g = &self.model.gaussians;
+        let canonical = g.deformed();
+        let deforming = match p.deform_active {
+            true => self
+                .model
+                .dynamic
+                .split()
+                .unwrap_or(canonical)
+                .min(canonical),
+            false => 0,
+        };
+        let alive = match self.passes.as_ref().filter(|_| g.transients > 0) {
+            Some(s) => {
+                let w: Vec<f32> = self.gpu.read(s.deform.opacity_scale(Slot::T1))?;
+                let rows = w.get(canonical as usize..g.n as usize).unwrap_or(&[]);
+                rows.iter().filter(|&&w| w > 0.0).count() as u32
+            }
+            None => 0,
+        };
+        Ok(cost::Rows {
+            still: canonical - deforming,
+            deforming,
+            alive,
+            transients: g.transients,
+        })
     }
 
     /// Fraction of the live Gaussians the deformation runs over (1 while dense).

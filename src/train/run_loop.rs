@@ -65,6 +65,8 @@ pub(super) struct LoopStats {
     pub dyn_sum: (f64, u32),
     /// Training seconds of earlier launches (a resumed run continues the count).
     pub wall_before: f64,
+    /// GPU time by population at the log lines (this launch's steps).
+    pub cost: super::cost::CostSampler,
 }
 
 impl LoopStats {
@@ -163,7 +165,8 @@ pub(super) fn train_loop(
         let line = message || test;
         let t0 = Instant::now();
         let n_before = tr.n();
-        let info = tr.step(line, line && spec.verbose)?;
+        // Log lines are timed: what each population costs is sampled there.
+        let info = tr.step(line, line)?;
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.step_ms.push(ms);
         let done = tr.last_plan.expect("a step ran");
@@ -238,6 +241,9 @@ pub(super) fn train_loop(
             }
         }
         if let Some(l) = info {
+            if let Some(rows) = l.rows {
+                stats.cost.add(rows, &l.timings);
+            }
             let dynamic = tr.dynamic_fraction();
             // Not counted in the training time: the probe is a measurement, not training.
             let probe = if test {
@@ -261,7 +267,9 @@ pub(super) fn train_loop(
             let worst = worst.take();
             if message {
                 let transients = if transients_on {
-                    format!(" ({} transient)", tr.model.gaussians.transients)
+                    let alive = l.rows.map_or(0, |r| r.alive);
+                    let held = tr.model.gaussians.transients;
+                    format!(" ({held} transient, {alive} alive at this step)")
                 } else {
                     String::new()
                 };

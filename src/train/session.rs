@@ -281,6 +281,10 @@ fn finish(
             median_ms: crate::stats::median(v),
         })
         .collect();
+    metrics.cost_per_step = stats.cost.report();
+    if let Some(c) = &metrics.cost_per_step {
+        progress.note(&c.summary());
+    }
     metrics.mean_dynamic_fraction =
         (stats.dyn_sum.1 > 0).then(|| stats.dyn_sum.0 / stats.dyn_sum.1 as f64);
     let log = super::outputs::read_log(&out.join("log.jsonl"))?;
