@@ -241,7 +241,8 @@ pub(super) fn train_loop(
             }
         }
         if let Some(l) = info {
-            if let Some(rows) = l.rows {
+            // A queue without timestamps times nothing: no sample rather than a zero one.
+            if let Some(rows) = l.rows.filter(|_| !l.timings.entries.is_empty()) {
                 stats.cost.add(rows, &l.timings);
             }
             let dynamic = tr.dynamic_fraction();
