@@ -178,6 +178,7 @@ fn metrics(out: &Path) -> serde_json::Value {
         "ms_per_step",
         "ms_per_step_by_phase",
         "train_seconds",
+        "cost_per_step",
         "mean_dynamic_fraction",
         "initial_psnr",
     ] {
