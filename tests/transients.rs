@@ -1,13 +1,14 @@
 //! Transient Gaussians in training (issue 37): spawned from the residual, kept after the
 //! canonical rows through densification, learning only their own temporal sections, spared by
 //! the opacity reset, carried through checkpoints, written to `transients.ply`, reopened by
-//! `eval` (the same scores) and exported per frame by `render --ply` (only what is alive).
+//! `eval` (the same scores) and exported per frame by `render --ply` (only what is alive);
+//! the dynamic/static split over the canonical rows beside them.
 
 mod train_common;
 
 use dispflow_vk::model::gaussians::Section;
 use dispflow_vk::testing;
-use dispflow_vk::train::config::{TrainConfig, TransientMode};
+use dispflow_vk::train::config::{SparsityMode, TrainConfig, TransientMode};
 use dispflow_vk::train::Trainer;
 use train_common::{tiny_config, tiny_dataset, tiny_scene};
 
@@ -97,6 +98,71 @@ fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
     assert!(centre.iter().all(|c| c.is_finite()));
 }
 
+/// The split (`sparsity.mode = auto`) is over the canonical rows only: transients never go
+/// through D, so none is ever in the dynamic list, the flags a checkpoint carries are one per
+/// canonical row (a spawn after a split leaves rows beyond them whose flags mean nothing), and a
+/// restored split trainer steps exactly as the one it was taken from.
+#[test]
+fn the_split_covers_the_canonical_rows_and_composes_with_transients() {
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let mut cfg = cfg();
+    cfg.sparsity.mode = SparsityMode::Auto;
+    cfg.sparsity.start = 0.0;
+    cfg.sparsity.every = 0.2;
+    cfg.sparsity.threshold_px = 0.0; // every canonical row that moves at all is dynamic
+    cfg.sparsity.noise_k = 0.0;
+    let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
+    // A checkpoint taken with both, and the losses of the three steps after it.
+    let mut both: Option<(_, Vec<u64>)> = None;
+    while tr.iteration < cfg.iterations {
+        let log = tr.step(true, false).unwrap().expect("values asked");
+        assert!(log.loss.loss.is_finite(), "iteration {}", log.iteration);
+        if let Some((_, after)) = both.as_mut().filter(|(_, a)| a.len() < 3) {
+            after.push(log.loss.loss.to_bits());
+        }
+        let g = &tr.model.gaussians;
+        let Some(count) = tr.model.dynamic.split() else {
+            continue;
+        };
+        assert!(count <= g.deformed(), "{count} dynamic of {}", g.deformed());
+        if count > 0 {
+            let idx: Vec<u32> = gpu
+                .read(tr.model.dynamic.idx.elems::<u32>(0, count as u64))
+                .unwrap();
+            let first = g.deformed();
+            assert!(idx.iter().all(|&i| i < first), "a transient in {idx:?}");
+        }
+        let f = tr.dynamic_fraction();
+        assert!((0.0..=1.0).contains(&f), "{f}");
+        if count > 0 && g.transients > 0 && both.is_none() {
+            both = Some((tr.checkpoint().unwrap(), Vec::new()));
+        }
+    }
+    let (c, after) = both.expect("a step with both a split with dynamic rows and transients");
+    assert_eq!(after.len(), 3, "three steps after the checkpoint");
+    let g = &c.model.gaussians;
+    let flags = &c.model.dynamic.as_ref().expect("split").flags;
+    assert_eq!(
+        flags.len(),
+        g.len() - g.transients,
+        "one flag per canonical row"
+    );
+    // Restored, it steps exactly as the trainer it was taken from (same plan, same split).
+    let mut a = Trainer::new(&gpu, &cfg, &ds).unwrap();
+    a.restore(&c).unwrap();
+    assert_eq!(a.checkpoint().unwrap(), c);
+    let resumed: Vec<u64> = (0..3)
+        .map(|_| a.step(true, false).unwrap().unwrap().loss.loss.to_bits())
+        .collect();
+    assert_eq!(
+        resumed, after,
+        "losses (bits) of the three steps after the checkpoint"
+    );
+}
+
 #[test]
 fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full() {
     std::env::set_var("LP_NUM_THREADS", "1");
@@ -134,7 +200,10 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
     let tmp = tempfile::tempdir().unwrap();
     let scene = tiny_scene(tmp.path());
     let toml = tmp.path().join("t.toml");
-    std::fs::write(&toml, cfg().to_toml()).unwrap();
+    // Split, so dynamic.bin is written beside transients.ply and eval reads both.
+    let mut c = cfg();
+    c.sparsity.mode = SparsityMode::Auto;
+    std::fs::write(&toml, c.to_toml()).unwrap();
     let out = tmp.path().join("run");
     let bin = env!("CARGO_BIN_EXE_dispflow-vk");
     let o = std::process::Command::new(bin)
@@ -159,6 +228,11 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
         m["num_gaussians"].as_u64().unwrap()
     );
     assert!(out.join("transients.ply").is_file());
+    // One dynamic.bin row (flag + 10 floats) per canonical Gaussian.
+    let canonical = m["gaussians_canonical"].as_u64().unwrap();
+    let dynamic_bin = std::fs::metadata(out.join("dynamic.bin")).unwrap().len();
+    let row = dispflow_vk::train::outputs::DYN_ROW as u64;
+    assert_eq!(dynamic_bin, canonical * row * 4);
     // What each population costs: the timed log steps' GPU time, attributed without a gap.
     let c = &m["cost_per_step"];
     assert!(c["sampled_steps"].as_u64().unwrap() > 0, "{c}");
@@ -177,6 +251,10 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
     assert!(
         alive > 0.0 && alive <= c["transient_rows"].as_f64().unwrap(),
         "{c}"
+    );
+    assert!(
+        pops[0]["rows"].as_f64().unwrap() > 0.0,
+        "the split drew static rows: {c}"
     );
     assert!(stderr.contains("GPU ms per step by population"), "{stderr}");
     // eval reopens point_cloud.ply + transients.ply and scores the same model.
@@ -201,7 +279,6 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let canonical = m["gaussians_canonical"].as_u64().unwrap();
     let plys = walk(&out.join("render"), "ply");
     let counts: Vec<u64> = plys
         .iter()

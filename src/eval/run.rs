@@ -185,14 +185,16 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
             path: dyn_path.display().to_string(),
             source,
         })?;
-        let want = 4 * DYN_ROW * gaussians.len();
+        // One row per canonical Gaussian (point_cloud.ply's; transients are never split).
+        let canonical = gaussians.len() - gaussians.transients;
+        let want = 4 * DYN_ROW * canonical;
         if b.len() != want {
             return Err(invalid(
                 &dyn_path,
                 format!(
-                    "{} bytes; point_cloud.ply's {} Gaussians need {want} ({DYN_ROW} f32 each)",
+                    "{} bytes; point_cloud.ply's {canonical} Gaussians need {want} ({DYN_ROW} \
+                     f32 each)",
                     b.len(),
-                    gaussians.len()
                 ),
             ));
         }

@@ -489,7 +489,7 @@ impl Model {
             mlp_params: gpu.read(d.params.all())?,
             mlp_m: gpu.read(d.m.all())?,
             mlp_v: gpu.read(d.v.all())?,
-            dynamic: self.dynamic.download(gpu, g.n)?,
+            dynamic: self.dynamic.download(gpu, g.deformed())?,
             nodes: match &self.nodes {
                 Some(n) if n.placed() => Some(n.download(gpu, g.n)?),
                 _ => None,
@@ -580,9 +580,11 @@ impl Model {
             b.check_values()?;
         }
         if let Some(d) = &s.dynamic {
-            if d.flags.len() != n {
+            // The split covers the canonical rows (transients never go through D).
+            let c = n - s.gaussians.transients.min(n);
+            if d.flags.len() != c {
                 return mismatch(format!(
-                    "blob dynamic: {} flags; {n} Gaussians need {n}",
+                    "blob dynamic: {} flags; {c} canonical Gaussians need {c}",
                     d.flags.len()
                 ));
             }

@@ -6,8 +6,8 @@
 //! format version, the iteration, the model's shape (SH coefficients, MLP depth and width,
 //! Gaussian budget) and per blob its name, length in floats and FNV-1a 64 of its bytes (hex).
 //! Every length and checksum is checked on read; a mismatch names the file and the blob.
-//! The optional blobs `dynamic` (0.0/1.0 per Gaussian) and `dynamic_fixed` (10 per Gaussian)
-//! are the model's dynamic/static split. Version 4 adds the transient Gaussians: the header's
+//! The optional blobs `dynamic` (0.0/1.0 per canonical Gaussian) and `dynamic_fixed` (10 per
+//! canonical Gaussian) are the model's dynamic/static split (transients are never split). Version 4 adds the transient Gaussians: the header's
 //! `transients` (the last rows) and the blobs `time` (c, τ per Gaussian) and `velocity` (with
 //! their moments `m.`/`v.`), present only when there are transients.
 //! Small and dependency-free.
@@ -384,13 +384,18 @@ impl Checkpoint {
         if mlp_m.len() != mlp_params.len() || mlp_v.len() != mlp_params.len() {
             return Err(bad(path, "MLP moments disagree with the parameter count"));
         }
+        // The split covers the canonical rows only (transients never go through D).
+        let c = n - gaussians.transients.min(n);
         let fixed = m.remove("dynamic_fixed");
         let dynamic = match m.remove("dynamic") {
             None => None,
-            Some(d) if d.len() != n => {
+            Some(d) if d.len() != c => {
                 return Err(bad(
                     path,
-                    &format!("blob dynamic: {} flags; {n} Gaussians need {n}", d.len()),
+                    &format!(
+                        "blob dynamic: {} flags; {c} canonical Gaussians need {c}",
+                        d.len()
+                    ),
                 ))
             }
             Some(d) => Some(
@@ -409,16 +414,16 @@ impl Checkpoint {
         };
         let dynamic = match (dynamic, fixed) {
             (None, None) => None,
-            (Some(flags), Some(fixed)) if fixed.len() == 10 * n => {
+            (Some(flags), Some(fixed)) if fixed.len() == 10 * c => {
                 Some(SplitSnapshot { flags, fixed })
             }
             _ => {
                 return Err(bad(
                     path,
                     &format!(
-                        "blobs dynamic and dynamic_fixed: both or neither, with {n} and {} \
+                        "blobs dynamic and dynamic_fixed: both or neither, with {c} and {} \
                          floats",
-                        10 * n
+                        10 * c
                     ),
                 ))
             }

@@ -1019,13 +1019,6 @@ impl TrainConfig {
         }
         let tc = &self.transient;
         if tc.mode == TransientMode::On {
-            if self.sparsity.mode == SparsityMode::Auto {
-                bad(
-                    "transient.mode",
-                    "\"on\" with sparsity.mode = \"auto\"",
-                    "sparsity off (the dynamic split does not know the transient rows yet)",
-                )?;
-            }
             at_least_1("transient.every", tc.every)?;
             at_least_1("transient.frames", tc.frames)?;
             at_least_1("transient.pixels", tc.pixels)?;

@@ -44,7 +44,8 @@ pub struct Report {
     /// Median wall-clock milliseconds per training step (`train` only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ms_per_step: Option<f64>,
-    /// Fraction of the Gaussians the deformation moves at the end (1 = dense model).
+    /// Fraction of the canonical Gaussians the deformation moves at the end (1 = dense model;
+    /// transients are never in it).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dynamic_fraction: Option<f64>,
     /// Mean dynamic fraction over the last launch's training steps that ran the MLP (`train`

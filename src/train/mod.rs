@@ -543,9 +543,10 @@ impl<'g> Trainer<'g> {
         })
     }
 
-    /// Fraction of the live Gaussians the deformation runs over (1 while dense).
+    /// Fraction of the canonical Gaussians the deformation runs over (1 while dense;
+    /// transients never go through it).
     pub fn dynamic_fraction(&self) -> f64 {
-        self.model.dynamic.fraction(self.n())
+        self.model.dynamic.fraction(self.model.gaussians.deformed())
     }
 
     /// How the model is drawn now: the deformation and SH degree of the last iteration.

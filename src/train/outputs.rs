@@ -178,7 +178,8 @@ pub fn save_side_by_side(path: &Path, w: u32, h: u32, images: &[&[[f32; 4]]]) ->
 pub const DYN_ROW: usize = 11;
 
 /// `dynamic.bin`: little-endian f32 rows of [`DYN_ROW`], one per Gaussian of
-/// `point_cloud.ply`, in its order. Absent: every Gaussian dynamic.
+/// `point_cloud.ply` (the canonical ones; transients are never split), in its order. Absent:
+/// every Gaussian dynamic.
 pub fn dynamic_bin(s: &SplitSnapshot) -> Vec<u8> {
     let mut v = Vec::with_capacity(DYN_ROW * s.flags.len());
     for (f, row) in s.flags.iter().zip(s.fixed.chunks_exact(10)) {

@@ -333,7 +333,11 @@ fn write_model_files(gpu: &Gpu, tr: &mut Trainer<'_>, out: &Path) -> Result<()> 
         write_atomic(&out.join("nodes.bin"), bytemuck::cast_slice(&p))?;
     }
     let dynamic_bin = out.join("dynamic.bin");
-    match tr.model.dynamic.download(gpu, tr.n())? {
+    match tr
+        .model
+        .dynamic
+        .download(gpu, tr.model.gaussians.deformed())?
+    {
         Some(d) => write_atomic(&dynamic_bin, &super::outputs::dynamic_bin(&d))?,
         None if dynamic_bin.is_file() => {
             std::fs::remove_file(&dynamic_bin).map_err(io(&dynamic_bin))?

@@ -120,14 +120,15 @@ impl Classifier {
         })
     }
 
-    /// Probes D over every Gaussian and splits `model`.
+    /// Probes D over every canonical Gaussian and splits them (transients move by their own
+    /// velocity, never through D, and stay outside the split).
     pub fn classify(
         &self,
         gpu: &Gpu,
         model: &mut Model,
         deform: &DeformPass,
     ) -> Result<SplitStats> {
-        let n = model.gaussians.n;
+        let n = model.gaussians.deformed();
         if n == 0 {
             model.dynamic.set_split(0);
             return Ok(SplitStats::default());

@@ -238,6 +238,7 @@ impl Evaluator {
 
     /// The dynamic mask of view `(camera, t)`: each pixel's blend weight on dynamic Gaussians
     /// ([H·W], 0 where only static Gaussians are seen, the coverage where the model is dense).
+    /// Transients move (by their velocity) and count as dynamic.
     pub fn dynamic_mask(
         &mut self,
         gpu: &Gpu,
@@ -246,11 +247,13 @@ impl Evaluator {
         camera: &Camera,
         t: f32,
     ) -> Result<Vec<f32>> {
-        let n = model.gaussians.n as usize;
-        let flags = match model.dynamic.download(gpu, n as u32)? {
+        let g = &model.gaussians;
+        let n = g.n as usize;
+        let mut flags = match model.dynamic.download(gpu, g.deformed())? {
             Some(s) => s.flags,
             None => vec![1; n],
         };
+        flags.resize(n, 1);
         let feats: Vec<[f32; 3]> = flags.iter().map(|&f| [f as f32; 3]).collect();
         let f = self.blend_features(gpu, model, view, camera, t, &feats)?;
         Ok(f.chunks_exact(3).map(|c| c[0]).collect())
