@@ -529,9 +529,10 @@ impl<'g> Trainer<'g> {
         };
         let alive = match self.passes.as_ref().filter(|_| g.transients > 0) {
             Some(s) => {
-                let w: Vec<f32> = self.gpu.read(s.deform.opacity_scale(Slot::T1))?;
-                let rows = w.get(canonical as usize..g.n as usize).unwrap_or(&[]);
-                rows.iter().filter(|&&w| w > 0.0).count() as u32
+                // The transient rows only (a canonical row's factor is 1).
+                let w = s.deform.opacity_scale(Slot::T1, canonical, g.transients);
+                let w: Vec<f32> = self.gpu.read(w)?;
+                w.iter().filter(|&&w| w > 0.0).count() as u32
             }
             None => 0,
         };

@@ -151,6 +151,7 @@ pub(super) fn train_loop(
     let mut dead_warned = false;
     let mut prune = None;
     let mut spawn_seen = None;
+    let mut split_seen = None;
     let transients_on = cfg.transient.mode == super::config::TransientMode::On;
     progress.start(cfg.iterations, tr.iteration);
     while tr.iteration < cfg.iterations {
@@ -234,6 +235,12 @@ pub(super) fn train_loop(
             stats.dyn_sum = (stats.dyn_sum.0 + tr.dynamic_fraction(), stats.dyn_sum.1 + 1);
         }
         progress.position(tr.iteration);
+        if tr.last_split.map(|s| s.0) != split_seen {
+            split_seen = tr.last_split.map(|s| s.0);
+            if let Some((it, s)) = tr.last_split {
+                progress.note(&format!("split after iteration {it}: {s}"));
+            }
+        }
         if tr.last_spawn.as_ref().map(|s| s.0) != spawn_seen {
             spawn_seen = tr.last_spawn.as_ref().map(|s| s.0);
             if let Some((it, s)) = &tr.last_spawn {
@@ -252,7 +259,10 @@ pub(super) fn train_loop(
             } else {
                 None
             };
-            let frozen = probe.is_some_and(|p| p.p99_px == Some(0.0));
+            // A split that froze every Gaussian also reads p99 = 0, but its MLP is alive (the
+            // split line says why).
+            let frozen =
+                probe.is_some_and(|p| p.p99_px == Some(0.0)) && tr.model.dynamic.split() != Some(0);
             if frozen && tr.view().deform_active && !dead_warned {
                 // Measured at 10× the fast rate: every ReLU of the trunk died and D(x, t)
                 // turned constant in t, silently a static model.

@@ -378,9 +378,10 @@ impl DeformPass {
         }
     }
 
-    /// The opacity factors of slot `k` [N] (meaningful only with transients).
-    pub fn opacity_scale(&self, k: Slot) -> BufSlice<'_> {
-        self.slot(k).op_scale.all()
+    /// The opacity factors of slot `k`, rows `first..first + count` (meaningful only with
+    /// transients).
+    pub fn opacity_scale(&self, k: Slot, first: u32, count: u32) -> BufSlice<'_> {
+        (self.slot(k).op_scale).elems::<f32>(first as u64, count as u64)
     }
 
     /// DispFlow's δ of the transient rows, v·(t2 − t1), over the deformation's rows of `delta`.

@@ -379,7 +379,7 @@ impl Evaluator {
         if model.gaussians.transients > 0 {
             // Transients as they are at `t`: opacity times the temporal weight, culled ones
             // dropped (a standard model of that instant has no time).
-            let w: Vec<f32> = gpu.read(self.deform.opacity_scale(Slot::T1))?;
+            let w: Vec<f32> = gpu.read(self.deform.opacity_scale(Slot::T1, 0, n as u32))?;
             let keep: Vec<usize> = (0..n).filter(|&i| w[i] > 0.0).collect();
             let r = 3 * (g.sh_coeffs as usize - 1);
             let sig = |l: f32| 1.0 / (1.0 + (-l).exp());
