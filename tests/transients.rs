@@ -219,6 +219,7 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
     assert!(stderr.contains("spawned after iteration"), "{stderr}");
+    assert!(stderr.contains("split after iteration"), "{stderr}");
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
     let nt = m["gaussians_transient"].as_u64().unwrap();
