@@ -186,7 +186,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
             source,
         })?;
         // One row per canonical Gaussian (point_cloud.ply's; transients are never split).
-        let canonical = gaussians.len() - gaussians.transients;
+        let canonical = gaussians.canonical();
         let want = 4 * DYN_ROW * canonical;
         if b.len() != want {
             return Err(invalid(

@@ -581,7 +581,7 @@ impl Model {
         }
         if let Some(d) = &s.dynamic {
             // The split covers the canonical rows (transients never go through D).
-            let c = n - s.gaussians.transients.min(n);
+            let c = s.gaussians.canonical();
             if d.flags.len() != c {
                 return mismatch(format!(
                     "blob dynamic: {} flags; {c} canonical Gaussians need {c}",

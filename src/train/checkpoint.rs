@@ -7,9 +7,10 @@
 //! Gaussian budget) and per blob its name, length in floats and FNV-1a 64 of its bytes (hex).
 //! Every length and checksum is checked on read; a mismatch names the file and the blob.
 //! The optional blobs `dynamic` (0.0/1.0 per canonical Gaussian) and `dynamic_fixed` (10 per
-//! canonical Gaussian) are the model's dynamic/static split (transients are never split). Version 4 adds the transient Gaussians: the header's
-//! `transients` (the last rows) and the blobs `time` (c, τ per Gaussian) and `velocity` (with
-//! their moments `m.`/`v.`), present only when there are transients.
+//! canonical Gaussian) are the model's dynamic/static split (transients are never split).
+//! Version 4 adds the transient Gaussians: the header's `transients` (the last rows) and the
+//! blobs `time` (c, τ per Gaussian) and `velocity` (with their moments `m.`/`v.`), present
+//! only when there are transients.
 //! Small and dependency-free.
 
 use std::collections::BTreeMap;
@@ -385,7 +386,7 @@ impl Checkpoint {
             return Err(bad(path, "MLP moments disagree with the parameter count"));
         }
         // The split covers the canonical rows only (transients never go through D).
-        let c = n - gaussians.transients.min(n);
+        let c = gaussians.canonical();
         let fixed = m.remove("dynamic_fixed");
         let dynamic = match m.remove("dynamic") {
             None => None,
