@@ -205,13 +205,21 @@ pub fn rerun_at_subgroup_sizes(this_test: &str) {
         return;
     }
     let exe = std::env::current_exe().expect("the test binary's path");
-    for (bits, lanes) in [(1024, 32), (128, 4)] {
-        let out = std::process::Command::new(&exe)
+    // Both re-runs at once: much of a kernel test's time is its single-threaded CPU twin.
+    let rerun = |bits: u32| {
+        std::process::Command::new(&exe)
             .args(["--skip", this_test, "--nocapture"])
             .env("LP_NATIVE_VECTOR_WIDTH", bits.to_string())
             .env("DISPFLOW_SUBGROUP_RERUN", "1")
             .output()
-            .expect("re-run the test binary");
+            .expect("re-run the test binary")
+    };
+    let outs = std::thread::scope(|sc| {
+        let wide = sc.spawn(|| rerun(1024));
+        let narrow = rerun(128);
+        [(1024, 32, wide.join().unwrap()), (128, 4, narrow)]
+    });
+    for (bits, lanes, out) in outs {
         let text = format!(
             "{}{}",
             String::from_utf8_lossy(&out.stdout),

@@ -17,7 +17,9 @@
 //! shrinking the displacement, which kills the deformation in longer runs.) lavapipe runs with LP_NUM_THREADS=1
 //! here: its float atomics then add in a fixed order, so every run is bit-reproducible and the
 //! noise is the seeds', not the thread scheduler's (with threads, one seed's TV-L1 run
-//! measured MMAP 0.134–0.200 in three runs).
+//! measured MMAP 0.134–0.200 in three runs). Each of the six runs is a child process (this
+//! test binary again, told which run by `DISPFLOW_MOTION_RUN`), two at a time: one core each,
+//! half the wall time, the same numbers.
 //! `DISPFLOW_MOTION_FLOWS=tvl1+residual,...` and `DISPFLOW_MOTION_WEIGHTS=1,0.1` print a
 //! wider sweep (not asserted).
 
@@ -58,6 +60,60 @@ fn train(ds: &data::Dataset, cfg: &TrainConfig) -> Outcome {
         drc: drc.expect("every test frame has a predecessor"),
         flow_mmap: mmap(per.iter().map(|e| e.flow_ap)).unwrap(),
     }
+}
+
+/// The child's report line: `MOTION_OUTCOME psnr mmap drc flow_mmap`.
+const REPORT: &str = "MOTION_OUTCOME";
+
+/// Runs one of the test's trainings (weight, flow, seed) in a child process: this test binary
+/// again, which trains it in [`child_run`] and prints its outcome.
+fn train_in_child(weight: f32, flow: MotionFlow, seed: u64) -> Outcome {
+    let exe = std::env::current_exe().expect("the test binary's path");
+    let out = std::process::Command::new(exe)
+        .args([
+            "--exact",
+            "motion_loss_raises_mmap_over_the_baseline",
+            "--nocapture",
+        ])
+        .env("DISPFLOW_MOTION_RUN", format!("{weight} {flow:?} {seed}"))
+        .output()
+        .expect("start the test binary again");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "the run ({weight}, {flow:?}, seed {seed}) failed:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let line = text
+        .lines()
+        .find_map(|l| l.strip_prefix(REPORT))
+        .unwrap_or_else(|| panic!("no {REPORT} line from the child:\n{text}"));
+    let v: Vec<f64> = line
+        .split_whitespace()
+        .map(|x| x.parse().unwrap())
+        .collect();
+    Outcome {
+        psnr: v[0],
+        mmap: v[1],
+        drc: v[2],
+        flow_mmap: v[3],
+    }
+}
+
+/// The child's side: trains the run `spec` (`weight flow seed`) names and prints its outcome.
+fn child_run(spec: &str) {
+    let f: Vec<&str> = spec.split_whitespace().collect();
+    let flow = match f[1] {
+        "Oracle" => MotionFlow::Oracle,
+        "Tvl1" => MotionFlow::Tvl1,
+        x => panic!("DISPFLOW_MOTION_RUN: unknown flow {x}"),
+    };
+    let mut c = config(f[0].parse().unwrap(), flow);
+    c.seed = f[2].parse().unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let o = train(&tiny_dataset(tmp.path()), &c);
+    // Rust's shortest round-trip formatting: the parent reads back the same f64s.
+    println!("{REPORT} {} {} {} {}", o.psnr, o.mmap, o.drc, o.flow_mmap);
 }
 
 fn config(weight: f32, flow: MotionFlow) -> TrainConfig {
@@ -122,17 +178,31 @@ fn show(name: &str, o: &Outcome) {
 #[test]
 fn motion_loss_raises_mmap_over_the_baseline() {
     std::env::set_var("LP_NUM_THREADS", "1");
-    let tmp = tempfile::tempdir().unwrap();
-    let ds = tiny_dataset(tmp.path());
-    let seeded = |w: f32, flow, seed| {
-        let mut c = config(w, flow);
-        c.seed = seed;
-        c
-    };
-    let base: Vec<Outcome> = [0, 1]
-        .iter()
-        .map(|&s| train(&ds, &seeded(0.0, MotionFlow::Tvl1, s)))
-        .collect();
+    if let Ok(spec) = std::env::var("DISPFLOW_MOTION_RUN") {
+        return child_run(&spec);
+    }
+    // The baselines (weight 0) and the motion-supervised runs, per seed; two threads, each
+    // waiting on its seed's child processes one after another.
+    let runs = [
+        (0.0, MotionFlow::Tvl1),
+        (1.0, MotionFlow::Tvl1),
+        (1.0, MotionFlow::Oracle),
+    ];
+    let per_seed: Vec<Vec<Outcome>> = std::thread::scope(|sc| {
+        let h: Vec<_> = (0..2u64)
+            .map(|seed| {
+                sc.spawn(move || {
+                    runs.iter()
+                        .map(|&(w, f)| train_in_child(w, f, seed))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        h.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let mut per_seed: Vec<std::vec::IntoIter<Outcome>> =
+        per_seed.into_iter().map(|v| v.into_iter()).collect();
+    let base: Vec<Outcome> = per_seed.iter_mut().map(|v| v.next().unwrap()).collect();
     for (s, b) in base.iter().enumerate() {
         show(&format!("baseline seed {s}"), b);
     }
@@ -145,9 +215,10 @@ fn motion_loss_raises_mmap_over_the_baseline() {
         (MotionFlow::Oracle, 0),
         (MotionFlow::Oracle, 1),
     ] {
-        let m = train(&ds, &seeded(1.0, flow, seed));
+        // Each seed's outcomes come in `runs` order: TV-L1, then the oracle.
+        let m = per_seed[seed].next().unwrap();
         show(&format!("{flow:?} α=1 seed {seed}"), &m);
-        let b = &base[seed as usize];
+        let b = &base[seed];
         let least = match flow {
             MotionFlow::Oracle => b.mmap + noise,
             MotionFlow::Tvl1 => b.mmap - noise,
@@ -185,6 +256,8 @@ fn motion_loss_raises_mmap_over_the_baseline() {
     let weights = list("DISPFLOW_MOTION_WEIGHTS", "1", |s| {
         s.parse::<f32>().unwrap()
     });
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
     for (name, (flow, sm)) in &flows {
         for &w in &weights {
             let mut c = config(w, *flow);
