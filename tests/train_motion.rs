@@ -71,3 +71,58 @@ fn motion_step_changes_the_deformation_in_both_orders() {
         );
     }
 }
+
+/// Every kernel of a timed step carries the zone of the pass that recorded it (`--verbose`'s
+/// table, `cost_per_step`): a kernel family that names its own zone (MLP, control nodes, the
+/// motion term's normalisation) hands the caller's zone back, so the kernels the caller records
+/// after it are not left unlabelled (the motion term's L1 was, and its per-pixel cost was
+/// counted as the Gaussians').
+#[test]
+fn every_kernel_of_a_timed_step_names_its_zone() {
+    use dispflow_vk::model::nodes::FieldKind;
+    use dispflow_vk::train::config::MotionRepresentation;
+    use dispflow_vk::train::cost::{kind_of, KernelKind};
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    for (field, repr, l1) in [
+        (
+            FieldKind::Nodes,
+            MotionRepresentation::Displacement,
+            "motion/motion_l1",
+        ),
+        (
+            FieldKind::Mlp,
+            MotionRepresentation::Displacement,
+            "motion/motion_l1",
+        ),
+        (
+            FieldKind::Mlp,
+            MotionRepresentation::GaussianFlow,
+            "motion/gflow_l1",
+        ),
+    ] {
+        let mut c = tiny_config(3);
+        c.warm_up = 0;
+        c.motion_start = 0;
+        c.densify.until = 0;
+        c.flow_preset = "fast".into();
+        c.deform_field.kind = field;
+        c.motion_representation = repr;
+        let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
+        let mut labels = Vec::new();
+        while tr.iteration < c.iterations {
+            let log = tr
+                .step(true, true)
+                .unwrap()
+                .expect("a step asked for its values logs");
+            labels.extend(log.timings.entries.into_iter().map(|(l, _)| l));
+        }
+        let unzoned: Vec<&String> = labels.iter().filter(|l| !l.contains('/')).collect();
+        assert!(unzoned.is_empty(), "{field:?} {repr:?}: {unzoned:?}");
+        for want in [l1, "deform/deform_apply"] {
+            assert!(labels.iter().any(|l| l == want), "{want} in {labels:?}");
+        }
+        assert_eq!(kind_of(l1), KernelKind::Image, "{l1}");
+    }
+}

@@ -91,7 +91,7 @@ impl Adam {
             "adam skip {skip:?}: (flag, needed) pairs expected"
         );
         let (bc1, bc2) = h.bias_corrections(step);
-        rec.set_zone("adam");
+        let outer = rec.set_zone("adam");
         for g in groups {
             let end = (g.first as u64 + g.count as u64) * 4;
             for s in [b.params, b.grads, b.m, b.v] {
@@ -122,6 +122,6 @@ impl Adam {
                 g.count,
             );
         }
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 }

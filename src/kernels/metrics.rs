@@ -173,7 +173,7 @@ impl MotionMetrics {
             "mmap: score {score:?} or mask {mask:?} smaller than {n} words"
         );
         let pc = b.params();
-        rec.set_zone("mmap");
+        let outer = rec.set_zone("mmap");
         rec.dispatch(
             &self.keys,
             &pc,
@@ -200,7 +200,7 @@ impl MotionMetrics {
             ],
             b.grid(),
         );
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 
     /// Records the DRC partial sums of `score` ([H·W] f32, F̂ ∈ [0, 1]) with the renders
@@ -222,13 +222,13 @@ impl MotionMetrics {
                 && gt.size >= n * 16,
             "drc: inputs smaller than {n} pixels"
         );
-        rec.set_zone("drc");
+        let outer = rec.set_zone("drc");
         rec.dispatch(
             &self.drc,
             &b.params(),
             &[score, frozen, full, gt, b.drc_sums.all()],
             b.grid(),
         );
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 }

@@ -437,7 +437,7 @@ impl Mlp {
             per_gaussian_time: per_g,
             time: t,
         };
-        rec.set_zone("mlp fwd");
+        let outer = rec.set_zone("mlp fwd");
         rec.dispatch_rows(&self.encode, &pc, &[xyz, times, b.x0, b.enc_t], n);
         let lin = |rec: &mut Recorder<'_>,
                    l: &LinearSpec,
@@ -477,7 +477,7 @@ impl Mlp {
             (out, OUT_DIMS as u32, 0),
             false,
         );
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 
     /// One Linear over `n` rows: `out[r][out_col + o] = act(b[o] + Σ_k W[o][k] · in[r][k])`
@@ -565,7 +565,7 @@ impl Mlp {
             grads.size >= total && params.size >= total,
             "grads {grads:?} or params {params:?} smaller than the layout"
         );
-        rec.set_zone("mlp bwd");
+        let outer = rec.set_zone("mlp bwd");
         if let Some(rp) = &self.rows {
             for l in &self.layout.linears {
                 let (fi, fo) = (l.fan_in as u32, l.fan_out as u32);
@@ -577,7 +577,7 @@ impl Mlp {
             let d = sub(d_out, r0, rows, OUT_DIMS as u64);
             self.backward_chunk(rec, b, &v, rows, params, d, grads, accumulate || k > 0);
         }
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 
     /// [`Mlp::backward`] of one chunk of rows (`bufs` for the per-network scratch).

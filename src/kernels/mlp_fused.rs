@@ -205,14 +205,14 @@ impl MlpFused {
         };
         let blocks = n.div_ceil(rows(self.precision));
         let gx = blocks.clamp(1, 65535);
-        rec.set_zone("mlp fused");
+        let outer = rec.set_zone("mlp fused");
         rec.dispatch(
             &self.fwd,
             &pc,
             &[params, self.table.all(), xyz, times, out],
             [gx, blocks.div_ceil(gx), 1],
         );
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 }
 

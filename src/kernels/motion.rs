@@ -451,7 +451,7 @@ impl MotionNorm {
         b.cfg = cfg;
         let pc = Self::params(b, cfg);
         let grid = Self::grid_dims(b);
-        rec.set_zone("motion norm");
+        let outer = rec.set_zone("motion norm");
         rec.dispatch(
             &self.mag,
             &pc,
@@ -499,7 +499,7 @@ impl MotionNorm {
             &[b.m.all(), b.stats.all(), b.m_hat.all()],
             grid,
         );
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 
     /// Records `∂L/∂field` ([H·W, C], written whole) from `∂L/∂m̂` ([H·W]) for the forward pass
@@ -520,7 +520,7 @@ impl MotionNorm {
         );
         let pc = Self::params(b, b.cfg);
         let grid = Self::grid_dims(b);
-        rec.set_zone("motion norm bwd");
+        let outer = rec.set_zone("motion norm bwd");
         rec.dispatch(
             &self.bwd_sums,
             &pc,
@@ -546,6 +546,6 @@ impl MotionNorm {
             ],
             grid,
         );
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 }

@@ -162,9 +162,9 @@ impl NodeKernels {
             flags: row_of.is_some() as u32,
         };
         let row_of = row_of.unwrap_or(means); // unread (flags 0)
-        rec.set_zone("nodes knn");
+        let outer = rec.set_zone("nodes knn");
         rec.dispatch_rows(&self.knn, &pc, &[means, nodes, row_of, knn], n);
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 
     /// The pairs of `knn` [n,K] sorted by node and each node's range (for the gather).
@@ -185,7 +185,7 @@ impl NodeKernels {
             flags: 0,
         };
         let binds = [knn, b.sort.keys[0].all(), b.sort.vals[0].all()];
-        rec.set_zone("nodes knn");
+        let outer = rec.set_zone("nodes knn");
         rec.dispatch_rows(&self.pairs, &pc, &binds, pairs);
         let out = self
             .sort
@@ -193,7 +193,7 @@ impl NodeKernels {
         rec.fill(b.ranges.all(), 0);
         let binds = [b.sort.keys[out].all(), b.ranges.all()];
         rec.dispatch_rows(&self.ranges, &pc, &binds, pairs);
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 
     /// Deformation rows [rows,10] of the Gaussians (all `rows` = N, or the dynamic rows
@@ -208,9 +208,9 @@ impl NodeKernels {
     ) {
         let (pc, idx) = x.params(rows, idx);
         let binds = [x.means, x.quats, x.nodes, x.node_out, x.knn, idx, out];
-        rec.set_zone("nodes blend");
+        let outer = rec.set_zone("nodes blend");
         rec.dispatch_rows(&self.lbs, &pc, &binds, rows);
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 
     /// Backward of [`Self::record_lbs`] from `d_out` [rows,10]: contribution rows, and the
@@ -241,8 +241,9 @@ impl NodeKernels {
             g_means,
             g_quats,
         ];
-        rec.set_zone("nodes blend bwd");
+        let outer = rec.set_zone("nodes blend bwd");
         rec.dispatch_rows(&self.lbs_bwd, &pc, &binds, rows);
+        rec.set_zone(&outer);
     }
 
     /// Per-node sums of the contributions: `d_node_out` [M,10] written, node-parameter
@@ -270,7 +271,8 @@ impl NodeKernels {
             d_node_out,
             g_nodes,
         ];
+        let outer = rec.set_zone("nodes blend bwd");
         rec.dispatch(&self.gather, &pc, &binds, [m, 1, 1]);
-        rec.set_zone("");
+        rec.set_zone(&outer);
     }
 }

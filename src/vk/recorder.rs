@@ -146,8 +146,10 @@ impl<'g> Recorder<'g> {
     }
 
     /// Prefix for the timing labels of the following commands (e.g. `"sort"`); `""` clears it.
-    pub fn set_zone(&mut self, zone: &str) {
-        self.zone = zone.to_string();
+    /// Returns the zone it replaces, which a kernel family that names its own zone restores
+    /// when it is done, so the caller's later kernels keep the caller's zone.
+    pub fn set_zone(&mut self, zone: &str) -> String {
+        std::mem::replace(&mut self.zone, zone.to_string())
     }
 
     /// Barriers emitted so far (for tests and reports).
