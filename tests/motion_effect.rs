@@ -14,8 +14,9 @@
 //! 0/1/2 measured TV-L1 gains of +0.084/−0.004/+0.031 and oracle gains of +0.19/+0.19/+0.28
 //! over baselines 0.102/0.130/0.098: one TV-L1 seed's gain is inside the noise, so a per-seed
 //! win is not asserted for it. Detached, they were +0.052/+0.009/+0.085, partly from
-//! shrinking the displacement, which kills the deformation in longer runs.) lavapipe runs with LP_NUM_THREADS=1
-//! here: its float atomics then add in a fixed order, so every run is bit-reproducible and the
+//! shrinking the displacement, which kills the deformation in longer runs. With the binary
+//! of issue 37, seeds 0/1: baselines 0.102/0.128, TV-L1 gains +0.082/−0.001, oracle
+//! +0.19/+0.21, noise 0.025.) lavapipe runs with LP_NUM_THREADS=1 here: its float atomics then add in a fixed order, so every run is bit-reproducible and the
 //! noise is the seeds', not the thread scheduler's (with threads, one seed's TV-L1 run
 //! measured MMAP 0.134–0.200 in three runs). Each of the six runs is a child process (this
 //! test binary again, told which run by `DISPFLOW_MOTION_RUN`), two at a time: one core each,
