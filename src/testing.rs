@@ -205,7 +205,7 @@ pub fn rerun_at_subgroup_sizes(this_test: &str) {
         return;
     }
     let exe = std::env::current_exe().expect("the test binary's path");
-    // Both re-runs at once: much of a kernel test's time is its single-threaded CPU twin.
+    // Both re-runs at once: a kernel test's CPU twins and serial stretches leave a core idle.
     let rerun = |bits: u32| {
         std::process::Command::new(&exe)
             .args(["--skip", this_test, "--nocapture"])
