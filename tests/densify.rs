@@ -17,7 +17,10 @@ mod raster_common;
 use dispflow_vk::kernels::densify::{
     reset_logit, Densifier, DensifyBuffers, DensifySettings, GaussianBuffers, LN_1_6,
 };
-use dispflow_vk::kernels::raster::{Camera, RasterSize, Rasterizer, RenderOpts};
+use dispflow_vk::kernels::raster::{Camera, RasterSize, Rasterizer, RenderOpts, G2D_STRIDE};
+
+/// Floats per 2D gradient record.
+const S: usize = G2D_STRIDE as usize;
 use dispflow_vk::model::gaussians::{GaussianLayout, HostGaussians, Section};
 use dispflow_vk::reference::densify::{self as twin, Action, DensifyStats};
 use dispflow_vk::testing::{self, Noise, TestGpu};
@@ -664,6 +667,7 @@ fn stats_match_twin_over_views() {
         let abs = k % 2 == 1;
         let opts = RenderOpts {
             abs_grad: abs,
+            detach_feature_weights: false,
             ..RenderOpts::default()
         };
         let (rb, _) = render(&gpu, &rast, cam, &up, &opts);
@@ -692,7 +696,9 @@ fn stats_match_twin_over_views() {
         let mut rec = Recorder::new(&gpu).unwrap();
         dens.record_stats(&mut rec, &b, &rb, n as u32, None, abs);
         rec.finish().unwrap();
-        let grad2d: Vec<f32> = gpu.read(rb.grad2d.elems::<f32>(0, 12 * n as u64)).unwrap();
+        let grad2d: Vec<f32> = gpu
+            .read(rb.grad2d.elems::<f32>(0, G2D_STRIDE * n as u64))
+            .unwrap();
         let splats: Vec<[f32; 4]> = gpu
             .read(rb.splats.elems::<[f32; 4]>(0, 3 * n as u64))
             .unwrap();
@@ -707,7 +713,7 @@ fn stats_match_twin_over_views() {
             // The statistic bounds the plain one: Σ|g| ≥ |Σg| per component.
             for i in 0..n {
                 for c in 0..2 {
-                    let (a, g) = (grad2d[12 * i + 10 + c], grad2d[12 * i + c]);
+                    let (a, g) = (grad2d[S * i + 10 + c], grad2d[S * i + c]);
                     assert!(a >= g.abs() * (1.0 - 1e-3), "view {k} row {i}: {a} < |{g}|");
                 }
             }
@@ -771,11 +777,11 @@ fn stats_with_non_finite_gradients_stay_finite() {
         5.0,
     ];
     let n = gx.len();
-    let mut grad2d = vec![0.0f32; 12 * 16];
+    let mut grad2d = vec![0.0f32; S * 16];
     let mut splats = vec![[0.0f32; 4]; 3 * 16];
     for i in 0..n {
-        grad2d[12 * i] = gx[i];
-        grad2d[12 * i + 1] = if i == 10 { f32::NAN } else { 0.5 * gx[i] };
+        grad2d[S * i] = gx[i];
+        grad2d[S * i + 1] = if i == 10 { f32::NAN } else { 0.5 * gx[i] };
         splats[3 * i + 1][3] = match i {
             9 => 0.0,       // culled: its NaN is never read
             11 => f32::NAN, // a NaN radius is not visible

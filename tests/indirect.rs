@@ -165,6 +165,7 @@ fn static_scene_under_known_camera_motion_has_no_indirect_scene_motion() {
         background: [0.0; 3],
         alpha_max: 0.99,
         abs_grad: false,
+        detach_feature_weights: false,
     };
     let (ra, oa) = raster_common::render(&gpu, &rast, &a, &up, &opts);
     let (rb, _) = raster_common::render(&gpu, &rast, &b, &up, &opts);

@@ -29,6 +29,7 @@ fn run_finite(scene: &Scene, w: u32, h: u32) -> (Rendered, Grads) {
         background: [0.2, 0.3, 0.4],
         alpha_max: 0.99,
         abs_grad: false,
+        detach_feature_weights: false,
     };
     let px = (w * h) as usize;
     let u = upstream(9, px, scene.feature_dims as usize);
@@ -252,6 +253,7 @@ const OPTS: RenderOpts = RenderOpts {
     background: [0.2, 0.3, 0.4],
     alpha_max: 0.99,
     abs_grad: false,
+    detach_feature_weights: false,
 };
 
 /// Tolerances of one GPU-vs-twin comparison (see the section comment).

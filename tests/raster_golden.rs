@@ -50,6 +50,7 @@ fn small_scene_matches_golden_png() {
         background: [0.05, 0.05, 0.08],
         alpha_max: 0.99,
         abs_grad: false,
+        detach_feature_weights: false,
     };
     // Every blend-forward variant against the one golden image.
     for (fv, _, out) in render_each(&gpu, &mut rast, &cam, &up, &opts) {

@@ -112,6 +112,7 @@ fn run(name: &str) {
         background: [0.0; 3],
         alpha_max: 0.999,
         abs_grad: false,
+        detach_feature_weights: false,
     };
     // Start with a capacity too small on purpose: render_checked must grow and re-run.
     let size = RasterSize {

@@ -1,7 +1,9 @@
 //! GPU rasteriser vs its CPU twin (`reference::raster`, f64 inside) on identical inputs:
 //! projection, blend forward (RGB, alpha, depth, transmittance, contributor counts, feature
 //! channels), blend backward and project backward, on random scenes at several image sizes,
-//! SH degrees and feature counts.
+//! SH degrees and feature counts; and the opacity factors held constant in the blend of the
+//! feature channels (`RenderOpts::detach_feature_weights`), against the twin and finite
+//! differences.
 //!
 //! Tolerances: forward values are f32 on the GPU against f64-then-rounded in the twin, so a few
 //! ulps of the largest term (abs 2e-5 on [0,1] colours). Gradients are sums of many per-pixel
@@ -11,9 +13,12 @@
 
 mod raster_common;
 
-use dispflow_vk::kernels::raster::{Rasterizer, RenderOpts, G2D_STRIDE};
+use dispflow_vk::kernels::raster::{
+    BlendBwdVariant, OutputGrads, RasterSize, Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
+};
 use dispflow_vk::reference::raster as twin;
-use dispflow_vk::testing;
+use dispflow_vk::testing::{self, Noise};
+use dispflow_vk::vk::Recorder;
 use raster_common::*;
 
 fn close_kind(what: &str, got: &[f32], want: &[f64]) {
@@ -50,6 +55,7 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
         background: [0.1, 0.2, 0.3],
         alpha_max: 0.99,
         abs_grad: seed % 2 == 0,
+        detach_feature_weights: false,
     };
     let up = Uploaded::new(&gpu, &scene);
     // Every forward variant, and every backward variant after each (the backward reads the
@@ -231,6 +237,10 @@ fn check_grads(
             "{ctx}: slots 10-11 written"
         );
     }
+    assert!(
+        col(12, 13).iter().all(|&v| v == 0.0),
+        "{ctx}: slot 12 written without detach_feature_weights"
+    );
     close_kind(
         &format!("{ctx}: d features"),
         &grads.d_features,
@@ -282,3 +292,184 @@ fn non_square_and_multi_batch_tiles() {
 }
 
 dispflow_vk::subgroup_reruns!();
+
+/// The transients' temporal weights detached in the motion pass: opacity factors (every fourth
+/// Gaussian culled) and 3 feature channels with upstream gradients on every output. Per
+/// blend-backward variant, attached and detached: slot 12 (the features' share of the opacity
+/// gradient), ∂L/∂w and ∂L/∂logit against the twin. The twin: its attached ∂L/∂w against
+/// central differences of the whole rendered loss, its detached one against those of the loss
+/// without the feature channels (the factor a constant in their blend), the logits' gradient
+/// the same either way, and the features' share large enough that the two choices differ.
+#[test]
+fn feature_weights_detached_from_the_opacity_factors() {
+    let gpu = testing::gpu();
+    let mut rast = Rasterizer::new(&gpu).unwrap();
+    let (k, cam) = (3u32, camera(40, 32));
+    let scene = random_scene(31, 80, 1, k);
+    let n = scene.len();
+    let mut r = Noise::new(32);
+    let w: Vec<f32> = (0..n)
+        .map(|i| match i % 4 {
+            0 => 0.0,
+            _ => 0.05 + 0.95 * (r.next_u32() as f32 / 4_294_967_296.0),
+        })
+        .collect();
+    let up = Uploaded::new(&gpu, &scene);
+    let wb = gpu.buffer_from("w", &w).unwrap();
+    let g = SplatInputs {
+        opacity_scale: Some(wb.all()),
+        ..up.inputs()
+    };
+    let size = RasterSize {
+        max_gaussians: n as u32,
+        width: cam.width,
+        height: cam.height,
+        sh_coeffs: up.sh_coeffs,
+        feature_dims: k,
+        isect_capacity: 64,
+    };
+    let mut b = rast.buffers(&gpu, &size).unwrap();
+    let base = RenderOpts {
+        background: [0.1, 0.2, 0.3],
+        ..RenderOpts::default()
+    };
+    rast.render_checked(&gpu, &mut b, &cam, &g, &base).unwrap();
+    let px = (cam.width * cam.height) as usize;
+    let u = upstream(33, px, k as usize);
+
+    // The twin, f64 from the same f32 inputs.
+    let g64 = twin::Gaussians64::from_f32(&twin::Gaussians {
+        means: &scene.means,
+        scales: &scene.scales,
+        quats: &scene.quats,
+        opacity_logits: &scene.logits,
+        sh: &scene.sh,
+        sh_coeffs: scene.sh_coeffs,
+        sh_degree: scene.sh_degree,
+    });
+    let w64: Vec<f64> = w.iter().map(|&v| v as f64).collect();
+    let feats: Vec<f64> = scene.features.iter().map(|&v| v as f64).collect();
+    let bp = twin::BlendParams {
+        width: cam.width,
+        height: cam.height,
+        alpha_max: base.alpha_max,
+        background: base.background,
+        feature_dims: k,
+    };
+    let d_rgb: Vec<[f64; 3]> = (0..px)
+        .map(|p| std::array::from_fn(|c| u.rgba[4 * p + c] as f64))
+        .collect();
+    let d_alpha: Vec<f64> = (0..px).map(|p| u.rgba[4 * p + 3] as f64).collect();
+    let d_depth: Vec<f64> = u.depth.iter().map(|&v| v as f64).collect();
+    let d_feat: Vec<f64> = u.features.iter().map(|&v| v as f64).collect();
+    let none: &[f64] = &[];
+    let proj = twin::project_scaled_f64(&cam, &g64, &w64);
+    let bg = twin::blend_bwd_f64(&bp, &proj, &feats, &d_rgb, &d_alpha, &d_depth, &d_feat);
+    let photo = twin::blend_bwd_f64(&bp, &proj, &feats, &d_rgb, &d_alpha, &d_depth, none);
+    let (pg_a, dw_a) = twin::project_scaled_bwd_f64(&cam, &g64, &w64, &bg, false);
+    let (pg_d, dw_d) = twin::project_scaled_bwd_f64(&cam, &g64, &w64, &bg, true);
+    let max = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    for i in 0..n {
+        let share = bg.opacity[i] - photo.opacity[i];
+        assert!(
+            (share - bg.opacity_features[i]).abs() <= 1e-9 * (1.0 + bg.opacity[i].abs()),
+            "twin: Gaussian {i}'s feature share {} against full − photometric {share}",
+            bg.opacity_features[i]
+        );
+    }
+    assert_eq!(
+        pg_a.opacity_logits, pg_d.opacity_logits,
+        "logits keep every share"
+    );
+    let spread = dw_a.iter().zip(&dw_d).map(|(a, d)| (a - d).abs());
+    let differ = spread.fold(0.0f64, f64::max);
+    assert!(
+        differ > 0.05 * max(&dw_a),
+        "the features' share is too small to tell the choices apart ({differ:.3e})"
+    );
+
+    // Twin against central differences: attached = the whole loss, detached = the loss
+    // without the feature channels.
+    let loss = |w: &[f64], with_features: bool| -> f64 {
+        let p = twin::project_scaled_f64(&cam, &g64, w);
+        let o = twin::blend_fwd_f64(&bp, &p, &feats);
+        let mut l = 0.0;
+        for q in 0..px {
+            l += (0..3).map(|c| d_rgb[q][c] * o.rgb[q][c]).sum::<f64>()
+                + d_alpha[q] * o.alpha[q]
+                + d_depth[q] * o.depth[q];
+            if with_features {
+                let f = k as usize;
+                l += (0..f)
+                    .map(|c| d_feat[q * f + c] * o.features[q * f + c])
+                    .sum::<f64>();
+            }
+        }
+        l
+    };
+    let h = 1e-6;
+    let mut checked = 0;
+    for i in (0..n)
+        .filter(|&i| w[i] > 0.1 && proj.radius[i] > 0)
+        .take(12)
+    {
+        for (with_features, want) in [(true, dw_a[i]), (false, dw_d[i])] {
+            let (mut a, mut c) = (w64.clone(), w64.clone());
+            a[i] += h;
+            c[i] -= h;
+            let fd = (loss(&a, with_features) - loss(&c, with_features)) / (2.0 * h);
+            assert!(
+                (fd - want).abs() <= 1e-5 * (1.0 + fd.abs()),
+                "w {i} (features {with_features}): fd {fd}, twin {want}"
+            );
+        }
+        checked += 1;
+    }
+    assert!(checked > 5, "{checked} factors checked");
+
+    // The GPU, every blend-backward variant, attached and detached.
+    let (dr, dd, df) = (
+        gpu.buffer_from("d rgba", &u.rgba).unwrap(),
+        gpu.buffer_from("d depth", &u.depth).unwrap(),
+        gpu.buffer_from("d features", &u.features).unwrap(),
+    );
+    let s = G2D_STRIDE as usize;
+    let default = rast.blend_bwd_variant();
+    for v in BlendBwdVariant::ALL {
+        rast.set_blend_bwd_variant(v);
+        for detach in [false, true] {
+            let ctx = format!("{}, detached {detach}", v.name());
+            let opts = RenderOpts {
+                detach_feature_weights: detach,
+                ..base
+            };
+            testing::fill_noise(&gpu, &b.d_op_scale, 5);
+            let og = OutputGrads {
+                rgba: dr.all(),
+                depth: Some(dd.all()),
+                features: Some(df.all()),
+            };
+            let mut rec = Recorder::new(&gpu).unwrap();
+            rast.backward(&mut rec, &b, &cam, &g, &opts, &og);
+            rec.finish().unwrap();
+            let read = |buf: &dispflow_vk::vk::Buffer, per: usize| -> Vec<f32> {
+                gpu.read(buf.elems::<f32>(0, (n * per) as u64)).unwrap()
+            };
+            let grad2d = read(&b.grad2d, s);
+            let slot12: Vec<f32> = (0..n).map(|i| grad2d[s * i + 12]).collect();
+            if detach {
+                close_kind(&format!("{ctx}: slot 12"), &slot12, &bg.opacity_features);
+            } else {
+                assert!(slot12.iter().all(|&x| x == 0.0), "{ctx}: slot 12 written");
+            }
+            let want = if detach { &dw_d } else { &dw_a };
+            close_kind(&format!("{ctx}: d w"), &read(&b.d_op_scale, 1), want);
+            close_kind(
+                &format!("{ctx}: d logits"),
+                &read(&b.d_opacity_logits, 1),
+                &pg_a.opacity_logits,
+            );
+        }
+    }
+    rast.set_blend_bwd_variant(default);
+}

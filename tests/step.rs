@@ -751,6 +751,7 @@ mod gpu_step {
             sparse: split,
             classify: false,
             spawn: false,
+            detach_motion_weights: false,
         };
         let mut rec = Recorder::new(gpu).unwrap();
         record_step(&mut rec, &plan, &model, &mut passes, &frames, 0.2);

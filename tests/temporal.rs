@@ -459,7 +459,7 @@ fn the_opacity_factor_through_the_rasteriser() {
     let d_depth: Vec<f64> = u.depth.iter().map(|&v| v as f64).collect();
     let none: &[f64] = &[];
     let bg = rtwin::blend_bwd_f64(&bp, &proj, none, &d_rgb, &d_alpha, &d_depth, none);
-    let (pg, dw_twin) = rtwin::project_scaled_bwd_f64(&cam, &g64, &w64, &bg);
+    let (pg, dw_twin) = rtwin::project_scaled_bwd_f64(&cam, &g64, &w64, &bg, false);
     let max = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     let (sw, sl) = (max(&dw_twin), max(&pg.opacity_logits));
     assert!(sw > 0.0 && sl > 0.0);

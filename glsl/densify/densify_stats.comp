@@ -8,11 +8,12 @@
 #include "common.glsl"
 #include "params.glsl"
 #include "densify.glsl"
+#include "raster.glsl"
 
 layout(local_size_x = 256) in;
 
 layout(push_constant) uniform Push { DensifyStatsParams pc; };
-layout(std430, binding = 0) readonly buffer Grad2d { float grad2d[]; };   // [N,12]; 0-1 ∂L/∂mean2d (px)
+layout(std430, binding = 0) readonly buffer Grad2d { float grad2d[]; };   // [N,G2D_STRIDE]; 0-1 ∂L/∂mean2d (px)
 layout(std430, binding = 1) readonly buffer Splats { vec4 splats[]; };    // [N,3]; [3i+1].w radius
 layout(std430, binding = 2) buffer GradAccum { float grad_accum[]; };     // [capacity]
 layout(std430, binding = 3) buffer Denom { float denom[]; };              // [capacity]
@@ -27,7 +28,7 @@ void main() {
     if (i >= pc.num_gaussians || skipped) return;
     float radius = splats[3u * i + 1u].w;
     if (!(radius > 0.0)) return;
-    uint at = 12u * i + (pc.abs_grad != 0u ? 10u : 0u); // Σ|g| (slots 10-11) or Σg (0-1)
+    uint at = G2D_STRIDE * i + (pc.abs_grad != 0u ? 10u : 0u); // Σ|g| (slots 10-11) or Σg (0-1)
     float gx = grad2d[at] * (0.5 * float(pc.width));
     float gy = grad2d[at + 1u] * (0.5 * float(pc.height));
     float norm = 0.0;

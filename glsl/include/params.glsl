@@ -201,7 +201,7 @@ struct ProjectParams {
     uint sh_degree;   // active degree (<= sqrt(sh_coeffs) - 1)
     uint isect_capacity;
     uint opacity_scale; // project/project_bwd: multiply each opacity by op_scale[i] (0: culled)
-    uint pad0;
+    uint feat_detach;   // project_bwd: d_op_scale leaves out grad2d slot 12 (the features' share)
     uint pad1;
     uint pad2;
 };
@@ -216,7 +216,7 @@ struct BlendParams {
     float alpha_max;  // 0.99 as in 3DGS (gsplat: 0.999)
     uint num_gaussians;
     uint abs_grad;    // blend_bwd: also accumulate Σ|∂L/∂mean2d| per pixel into slots 10-11
-    uint pad1;
+    uint feat_op;     // blend_bwd: also accumulate the feature channels' share of slot 5 into slot 12
 };
 
 // src/kernels/loss.rs — photometric loss 0.8·L1 + 0.2·(1 − SSIM) and its gradient.

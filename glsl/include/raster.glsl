@@ -13,9 +13,11 @@
 //   [2] = (r, g, b, 0)
 #define SPLAT_STRIDE 3
 
-// Per-Gaussian 2D gradient record accumulated by blend_bwd (stride 12 floats):
-//   0-1 mean2d, 2-4 conic (a, b, c), 5 opacity (after sigmoid), 6-8 colour, 9 depth, 10-11 unused
-#define G2D_STRIDE 12
+// Per-Gaussian 2D gradient record accumulated by blend_bwd (stride 13 floats):
+//   0-1 mean2d, 2-4 conic (a, b, c), 5 opacity (after sigmoid), 6-8 colour, 9 depth,
+//   10-11 Σ|∂L/∂mean2d| (BlendParams.abs_grad), 12 the feature channels' share of slot 5
+//   (BlendParams.feat_op: what project_bwd leaves out of the opacity factors' gradient)
+#define G2D_STRIDE 13
 
 mat3 cam_rot(ProjectParams p) {
     // GLSL matrices are column-major: build from rows, then transpose.

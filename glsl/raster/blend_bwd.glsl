@@ -94,10 +94,11 @@ void main() {
 
             vec2 g_mean = vec2(0.0);
             vec3 g_con = vec3(0.0), g_col = vec3(0.0);
-            float g_op = 0.0, g_z = 0.0;
+            float g_op = 0.0, g_z = 0.0, g_op_f = 0.0;
 #if FEAT > 0
             float gfe[FEAT];
             for (int c = 0; c < FEAT; ++c) gfe[c] = 0.0;
+            float g_alpha_f = 0.0; // the feature channels' share of g_alpha
 #endif
             if (live) {
                 float Ti = T / (1.0 - alpha);
@@ -113,13 +114,17 @@ void main() {
                 for (int c = 0; c < FEAT; ++c) {
                     float f = s_feat[k * FEAT + c];
                     gfe[c] = w * g_f[c];
-                    g_alpha += Ti * g_f[c] * (f - R_f[c]);
+                    g_alpha_f += Ti * g_f[c] * (f - R_f[c]);
                     R_f[c] = f * alpha + (1.0 - alpha) * R_f[c];
                 }
+                g_alpha += g_alpha_f;
 #endif
                 T = Ti;
                 if (g < pc.alpha_max) { // unclamped: α = opacity · exp(−σ)
                     g_op = g_alpha * exp(-sigma);
+#if FEAT > 0
+                    g_op_f = g_alpha_f * exp(-sigma);
+#endif
                     float g_sigma = -g_alpha * alpha;
                     g_mean = g_sigma * vec2(con.x * d.x + con.y * d.y, con.z * d.y + con.y * d.x);
                     g_con = g_sigma * vec3(0.5 * d.x * d.x, d.x * d.y, 0.5 * d.y * d.y);
@@ -140,6 +145,7 @@ void main() {
                 add(base + 10, abs(g_mean.x));
                 add(base + 11, abs(g_mean.y));
             }
+            if (pc.feat_op != 0u) add(base + 12, g_op_f); // uniform
 #if FEAT > 0
             for (int c = 0; c < FEAT; ++c) {
                 float s = subgroupAdd(gfe[c]);

@@ -86,7 +86,7 @@ void main() {
 #endif
         vec2 g_mean = vec2(0.0), g_abs = vec2(0.0);
         vec3 g_con = vec3(0.0), g_col = vec3(0.0);
-        float g_op = 0.0, g_z = 0.0;
+        float g_op = 0.0, g_z = 0.0, g_op_f = 0.0;
         bool any_live = false;
         for (int i = 0; i < PX; ++i) {
             uint q = t + WG * uint(i);
@@ -105,16 +105,19 @@ void main() {
                 R_rgb[i] = col * alpha + (1.0 - alpha) * R_rgb[i];
                 R_a[i] = alpha + (1.0 - alpha) * R_a[i];
                 R_d[i] = a.z * alpha + (1.0 - alpha) * R_d[i];
+                float g_alpha_f = 0.0; // the feature channels' share of g_alpha
 #if FEAT > 0
                 for (int c = 0; c < FEAT; ++c) {
                     gfe[c] += w * g_f[i * FEAT + c];
-                    g_alpha += Ti * g_f[i * FEAT + c] * (f[c] - R_f[i * FEAT + c]);
+                    g_alpha_f += Ti * g_f[i * FEAT + c] * (f[c] - R_f[i * FEAT + c]);
                     R_f[i * FEAT + c] = f[c] * alpha + (1.0 - alpha) * R_f[i * FEAT + c];
                 }
+                g_alpha += g_alpha_f;
 #endif
                 T[i] = Ti;
                 if (g < pc.alpha_max) { // unclamped: α = opacity · exp(−σ)
                     g_op += g_alpha * exp(-sigma);
+                    g_op_f += g_alpha_f * exp(-sigma);
                     float g_sigma = -g_alpha * alpha;
                     vec2 gm = g_sigma * vec2(con.x * d.x + con.y * d.y, con.z * d.y + con.y * d.x);
                     g_mean += gm;
@@ -139,6 +142,7 @@ void main() {
             add(base + 10, g_abs.x);
             add(base + 11, g_abs.y);
         }
+        if (pc.feat_op != 0u) add(base + 12, g_op_f); // uniform
 #if FEAT > 0
         for (int c = 0; c < FEAT; ++c) {
             float s = subgroupAdd(gfe[c]);

@@ -7,7 +7,9 @@
 // the 1.3×fov clamp: a clamped coordinate passes no gradient to x or y, only through z) and
 // depth. The SH view direction is detached, as in 3DGS/gsplat. Culled Gaussians get zeros.
 // With pc.opacity_scale the splat's opacity was σ(o)·w (w = op_scale[i]): ∂L/∂o picks up the
-// factor w and ∂L/∂w = g_op·σ(o) goes to d_op_scale (a transient's temporal weight).
+// factor w and ∂L/∂w = g_op·σ(o) goes to d_op_scale (a transient's temporal weight); with
+// pc.feat_detach, g_op less the feature channels' share (slot 12): the factor is held constant
+// in the blend of the features (the motion pass's channels), ∂L/∂o keeps every share.
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 #include "params.glsl"
@@ -96,7 +98,10 @@ void main() {
     for (uint k = 0; k < pc.sh_coeffs; ++k) write_dsh(i, k, k < nb ? b[k] * g_raw : vec3(0.0));
 
     d_logits[i] = g_op * op_w * sigmoid_grad(logits[i]);
-    if (pc.opacity_scale != 0u) d_op_scale[i] = g_op * sigmoid(logits[i]);
+    if (pc.opacity_scale != 0u) {
+        float g_op_w = pc.feat_detach != 0u ? g_op - grad2d[gb + 12] : g_op;
+        d_op_scale[i] = g_op_w * sigmoid(logits[i]);
+    }
 
     // conic = Σ2⁻¹, G the symmetric gradient (b appears twice): ∂L/∂Σ2 = −C·G·C. Formed as a
     // matrix in f32, C loses its smallest eigenvalue 1/λ_max (a needle's length) and every

@@ -10,7 +10,7 @@ use crate::data::builtin::builtin_scene;
 use crate::data::{self, synthetic::Preset as ScenePreset};
 use crate::error::Result;
 use crate::kernels::mlp_fused::FmaPeak;
-use crate::train::config::{Preset, TrainConfig};
+use crate::train::config::{MotionWeights, Preset, TrainConfig};
 use crate::train::Trainer;
 use crate::vk::{Gpu, Recorder, Timings};
 
@@ -151,6 +151,11 @@ pub(crate) fn timed_config(weight: f32) -> TrainConfig {
 /// turned into transients (issue 37: what a step costs at the same total count).
 pub const TRANSIENT_ROW: &str = "the device's kernel set, 25 % of the Gaussians transient";
 
+/// [`TRANSIENT_ROW`] with the transients' temporal weights detached in the motion pass (the
+/// blend backward's extra per-splat sum, `[transient] motion_weights = "detached"`): DispFlow
+/// only, the baseline has no motion channels.
+pub const DETACHED_ROW: &str = "the device's kernel set, 25 % transient, motion weights detached";
+
 /// Turns the last quarter of `tr`'s Gaussians into transients: centres spread over the time
 /// range, widths at twice the floor, small velocities; so at any time a few of them are alive,
 /// the rest culled before projection, as in a trained model.
@@ -212,14 +217,23 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             std::env::set_var("DISPFLOW_MLP_KERNELS", own.mlp);
             std::env::set_var("DISPFLOW_BLEND_FWD", own.blend_fwd);
             std::env::set_var("DISPFLOW_BLEND_BWD", own.blend_bwd);
-            let mut tr = Trainer::new(gpu, &cfg, &data)?;
-            tr.step(false, false)?;
+            let mut detached = cfg.clone();
+            detached.transient.motion_weights = MotionWeights::Detached;
+            let mut transient_rows = vec![(TRANSIENT_ROW, &cfg)];
+            if weight > 0.0 {
+                transient_rows.push((DETACHED_ROW, &detached));
+            }
+            for (_, c) in &transient_rows {
+                let mut tr = Trainer::new(gpu, c, &data)?;
+                tr.step(false, false)?;
+                make_quarter_transient(&mut tr)?;
+                trainers.push(tr);
+            }
             std::env::remove_var("DISPFLOW_MLP_KERNELS");
             std::env::remove_var("DISPFLOW_BLEND_FWD");
             std::env::remove_var("DISPFLOW_BLEND_BWD");
-            make_quarter_transient(&mut tr)?;
-            trainers.push(tr);
-            let labels = KERNEL_SETS.iter().map(|k| k.name).chain([TRANSIENT_ROW]);
+            let labels =
+                (KERNEL_SETS.iter().map(|k| k.name)).chain(transient_rows.iter().map(|(l, _)| *l));
             let times = time_interleaved(&mut trainers, warm, steps)?;
             for ((tr, t), k) in trainers.iter().zip(times).zip(labels) {
                 rows.push(StepRow {
@@ -276,19 +290,32 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
                 .collect(),
         });
     }
+    let own = KERNEL_SETS[default_set(gpu)].name;
+    let find = |r: &StepRow, kernels: &str| {
+        (rows.iter()).find(|b| b.scene == r.scene && b.method == r.method && b.kernels == kernels)
+    };
     for r in rows.iter().filter(|r| r.kernels == TRANSIENT_ROW) {
         // The same kernels without transients.
-        let own = KERNEL_SETS[default_set(gpu)].name;
-        if let Some(b) = rows
-            .iter()
-            .find(|b| b.scene == r.scene && b.method == r.method && b.kernels == own)
-        {
+        if let Some(b) = find(r, own) {
             println!(
                 "{} {}: a step with a quarter of its {} Gaussians transient costs {:.2}× one \
                  without ({:.2} vs {:.2} ms)",
                 r.scene,
                 r.method,
                 r.gaussians,
+                r.median_ms / b.median_ms,
+                r.median_ms,
+                b.median_ms
+            );
+        }
+    }
+    for r in rows.iter().filter(|r| r.kernels == DETACHED_ROW) {
+        if let Some(b) = find(r, TRANSIENT_ROW) {
+            println!(
+                "{} {}: with the motion weights detached the step costs {:.2}× the attached \
+                 one ({:.2} vs {:.2} ms)",
+                r.scene,
+                r.method,
                 r.median_ms / b.median_ms,
                 r.median_ms,
                 b.median_ms

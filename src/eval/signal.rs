@@ -416,6 +416,7 @@ impl Probe {
                 background: tr.background,
                 alpha_max: ALPHA_MAX,
                 abs_grad: false,
+                detach_feature_weights: false,
             },
         );
         let g = &model.gaussians;

@@ -331,7 +331,7 @@ impl Densifier {
     }
 
     /// Accumulates the statistics of the last rasteriser backward pass over `n` Gaussians
-    /// (`raster.grad2d` [N,12], `raster.splats` [N,3] vec4, image size from `raster`). Adds
+    /// (`raster.grad2d` [N, G2D_STRIDE], `raster.splats` [N,3] vec4, image size from `raster`). Adds
     /// nothing when a flag in `skip` ((flag, needed) u32 pairs, e.g. the step's render
     /// overflows) is set; `None`: always add.
     pub fn record_stats(

@@ -72,7 +72,7 @@ impl GaussianFlow {
         rec.dispatch_rows(&self.feat, &pc, &[splats_t1, splats_t2, feat], n);
     }
 
-    /// ∂L/∂channels [N,6] added to the 2D gradient records ([N,12]) at t1 and t2.
+    /// ∂L/∂channels [N,6] added to the 2D gradient records ([N, G2D_STRIDE]) at t1 and t2.
     pub fn features_bwd(
         &self,
         rec: &mut Recorder<'_>,

@@ -161,7 +161,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             sh_degree,
             isect_capacity,
             opacity_scale,
-            pad0,
+            feat_detach,
             pad1,
             pad2
         ),
@@ -175,7 +175,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             alpha_max,
             num_gaussians,
             abs_grad,
-            pad1
+            feat_op
         ),
         layout!(
             mlp::MlpEncodeParams,

@@ -28,8 +28,9 @@ pub const TILE: u32 = 16;
 /// vec4s per splat record (mirrors `SPLAT_STRIDE`).
 pub const SPLAT_STRIDE: u64 = 3;
 /// Floats per 2D gradient record (mirrors `G2D_STRIDE`): mean2d 2, conic 3, opacity 1,
-/// colour 3, depth 1, unused 2.
-pub const G2D_STRIDE: u64 = 12;
+/// colour 3, depth 1, Σ|∂L/∂mean2d| 2 (`RenderOpts::abs_grad`), the feature channels' share of
+/// the opacity gradient 1 (`RenderOpts::detach_feature_weights`).
+pub const G2D_STRIDE: u64 = 13;
 /// Feature-channel counts with a compiled blend variant (0: none, 2: a 2D field, 3:
 /// displacement flow, 6: Gaussian flow's affine channels, see `kernels::gflow`).
 pub const FEATURE_DIMS: [u32; 4] = [0, 2, 3, 6];
@@ -111,7 +112,8 @@ pub struct ProjectParams {
     pub isect_capacity: u32,
     /// 1: each opacity is multiplied by `SplatInputs::opacity_scale` (bound at 9 / 13).
     pub opacity_scale: u32,
-    pub pad0: u32,
+    /// 1: `d_op_scale` leaves out the feature channels' share of the opacity gradient.
+    pub feat_detach: u32,
     pub pad1: u32,
     pub pad2: u32,
 }
@@ -128,7 +130,8 @@ pub struct BlendParams {
     pub alpha_max: f32,
     pub num_gaussians: u32,
     pub abs_grad: u32,
-    pub pad1: u32,
+    /// 1: the backward also accumulates the feature channels' share of slot 5 into slot 12.
+    pub feat_op: u32,
 }
 
 /// Blend options.
@@ -140,6 +143,12 @@ pub struct RenderOpts {
     /// The backward also accumulates Σ_pixels |∂L/∂mean2d| per component into `grad2d`'s
     /// slots 10-11 (the official Deformable-3DGS rasteriser's densification statistic).
     pub abs_grad: bool,
+    /// The opacity factors (`SplatInputs::opacity_scale`) are held constant in the blend of the
+    /// feature channels: `d_op_scale` gets only the rgb, alpha and depth outputs' gradient,
+    /// while the logits and the 2D geometry keep every output's. The transients' temporal
+    /// weights detached in the motion pass (`[transient] motion_weights`). Costs one more
+    /// atomic per splat and tile in the blend backward.
+    pub detach_feature_weights: bool,
 }
 
 impl Default for RenderOpts {
@@ -148,6 +157,7 @@ impl Default for RenderOpts {
             background: [0.0; 3],
             alpha_max: 0.99,
             abs_grad: false,
+            detach_feature_weights: false,
         }
     }
 }
@@ -230,7 +240,7 @@ pub struct RasterBuffers {
     pub n_contrib: Buffer,
     /// [H·W, feature_dims]
     pub out_features: Buffer,
-    /// [N, 12] per-splat 2D gradients (see `G2D_STRIDE`), accumulated by blend_bwd.
+    /// [N, G2D_STRIDE] per-splat 2D gradients (see `G2D_STRIDE`), accumulated by blend_bwd.
     pub grad2d: Buffer,
     /// [N, feature_dims]
     pub d_features: Buffer,
@@ -595,7 +605,7 @@ impl Rasterizer {
             alpha_max: o.alpha_max,
             num_gaussians: g.n,
             abs_grad: o.abs_grad as u32,
-            pad1: 0,
+            feat_op: (o.detach_feature_weights && g.features.is_some()) as u32,
         }
     }
 
@@ -726,7 +736,7 @@ impl Rasterizer {
         d: &OutputGrads<'_>,
     ) {
         self.backward_blend(rec, b, cam, g, o, d);
-        self.backward_project(rec, b, cam, g);
+        self.backward_project(rec, b, cam, g, o);
     }
 
     /// The blend backward of `backward` alone: `b.grad2d` and `b.d_features`.
@@ -779,9 +789,13 @@ impl Rasterizer {
         b: &RasterBuffers,
         cam: &Camera,
         g: &SplatInputs<'_>,
+        o: &RenderOpts,
     ) {
         Self::check(b, cam, g);
-        let pp = Self::project_params(b, cam, g);
+        let pp = ProjectParams {
+            feat_detach: (o.detach_feature_weights && g.features.is_some()) as u32,
+            ..Self::project_params(b, cam, g)
+        };
         rec.dispatch_rows(
             &self.project_bwd,
             &pp,

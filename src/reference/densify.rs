@@ -106,13 +106,14 @@ pub fn accumulate_stats(
 ) {
     let (hw, hh) = (0.5 * width as f32, 0.5 * height as f32);
     let at = if abs_grad { 10 } else { 0 };
+    let stride = crate::kernels::raster::G2D_STRIDE as usize;
     for i in 0..n {
         let radius = splats[3 * i + 1][3];
         if radius.is_nan() || radius <= 0.0 {
             continue;
         }
-        let gx = grad2d[12 * i + at] * hw;
-        let gy = grad2d[12 * i + at + 1] * hh;
+        let gx = grad2d[stride * i + at] * hw;
+        let gy = grad2d[stride * i + at + 1] * hh;
         let mut norm = 0.0f32;
         if gx.is_finite() && gy.is_finite() {
             norm = (gx as f64).hypot(gy as f64) as f32;

@@ -367,6 +367,22 @@ pub struct TransientConfig {
     pub lr_centre: f64,
     pub lr_width: f64,
     pub lr_velocity_mult: f64,
+    /// Whether the motion term's gradient reaches a transient's time centre and width through
+    /// its temporal weight in the blend of the displacement (or Gaussian-flow) channels:
+    /// `attached` (the default: the photometric render blends those channels with the same
+    /// weights as its colour and one backward carries both) or `detached` (the weight is a
+    /// constant there; c and σ learn from the photometric outputs alone). Either way v gets
+    /// the term's gradient through v·(t2 − t1), and the base opacity through every output.
+    pub motion_weights: MotionWeights,
+}
+
+/// How a transient's temporal weight enters the motion term's backward ([`TransientConfig`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MotionWeights {
+    #[default]
+    Attached,
+    Detached,
 }
 
 impl Default for TransientConfig {
@@ -390,6 +406,7 @@ impl Default for TransientConfig {
             lr_centre: 0.002,
             lr_width: 0.01,
             lr_velocity_mult: 1.0,
+            motion_weights: MotionWeights::Attached,
         }
     }
 }

@@ -7,8 +7,8 @@
 //! (Over ~600 lines with its unit tests: one schedule, a test for each of its parts.)
 
 use super::config::{
-    Background, CurriculumAnchor, DeformMode, GradStat, MotionOrder, MotionSchedule, SparsityMode,
-    TimeNoise, TrainConfig,
+    Background, CurriculumAnchor, DeformMode, GradStat, MotionOrder, MotionSchedule, MotionWeights,
+    SparsityMode, TimeNoise, TrainConfig, TransientMode,
 };
 use crate::model::optim::ExpLr;
 
@@ -196,6 +196,10 @@ pub struct StepPlan {
     pub classify: bool,
     /// Transients are spawned after the step (and after its densification).
     pub spawn: bool,
+    /// The transients' temporal weights are constants in the blend of the motion channels
+    /// (`[transient] motion_weights = "detached"` on a motion step; the step asks the blend for
+    /// the features' share only when the model holds transients).
+    pub detach_motion_weights: bool,
 }
 
 impl StepPlan {
@@ -259,6 +263,8 @@ impl StepPlan {
             // Densification renumbers the Gaussians: a split model is probed again at once.
             classify: split_due || (sparse && densify.is_some()),
             spawn: spawn_due(cfg, it),
+            detach_motion_weights: motion.is_some()
+                && cfg.transient.motion_weights == MotionWeights::Detached,
         }
     }
 }
@@ -360,7 +366,7 @@ pub fn motion_weight_at(cfg: &TrainConfig, iteration: u32) -> f32 {
 /// window, counted in fractions of the run).
 pub fn spawn_due(cfg: &TrainConfig, it: u32) -> bool {
     let t = &cfg.transient;
-    if t.mode != super::config::TransientMode::On {
+    if t.mode != TransientMode::On {
         return false;
     }
     let n = cfg.iterations as f64;
@@ -451,6 +457,25 @@ mod tests {
     fn frames() -> FrameTimes {
         // Deliberately not in time order; two frames share t = 0.5.
         FrameTimes::new(vec![0.5, 0.0, 1.0, 0.25, 0.5], TimeNoise::Off, true, 2.0)
+    }
+
+    #[test]
+    fn motion_weights_are_detached_only_on_motion_steps_when_asked_to() {
+        let f = frames();
+        let detached = |w| -> Vec<u32> {
+            let mut c = cfg();
+            c.transient.motion_weights = w;
+            (1..=c.iterations)
+                .filter(|&it| StepPlan::at(&c, &f, it).detach_motion_weights)
+                .collect()
+        };
+        let c = cfg();
+        let motion: Vec<u32> = (1..=c.iterations)
+            .filter(|&it| StepPlan::at(&c, &f, it).motion.is_some())
+            .collect();
+        assert!(!motion.is_empty());
+        assert_eq!(detached(MotionWeights::Detached), motion);
+        assert!(detached(MotionWeights::Attached).is_empty());
     }
 
     #[test]

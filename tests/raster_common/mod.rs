@@ -281,7 +281,7 @@ pub fn backward(
     let rd =
         |buf: &Buffer, per: u64| -> Vec<f32> { gpu.read(buf.elems::<f32>(0, n * per)).unwrap() };
     Grads {
-        grad2d: rd(&b.grad2d, 12),
+        grad2d: rd(&b.grad2d, dispflow_vk::kernels::raster::G2D_STRIDE),
         d_features: rd(&b.d_features, up.feature_dims as u64),
         d_means: rd(&b.d_means, 3),
         d_scales: rd(&b.d_scales, 3),

@@ -256,6 +256,7 @@ pub fn blend_bwd_f64<T: Copy + Into<f64>>(
         mean2d_abs: vec![[0.0; 2]; n],
         conic: vec![[0.0; 3]; n],
         opacity: vec![0.0; n],
+        opacity_features: vec![0.0; n],
         color: vec![[0.0; 3]; n],
         depth: vec![0.0; n],
         features: vec![0.0; n * k],
@@ -271,6 +272,7 @@ pub fn blend_bwd_f64<T: Copy + Into<f64>>(
             let ddepth = up(d_depth, pix);
             // rgb += T_final·bg, alpha = 1 − T_final.
             let mut dt = drgb[0] * bg[0] + drgb[1] * bg[1] + drgb[2] * bg[2] - dalpha;
+            let mut dt_f = 0.0; // features have no background layer
             for e in list.iter().rev() {
                 let i = e.i;
                 let w = e.alpha * e.t;
@@ -281,19 +283,26 @@ pub fn blend_bwd_f64<T: Copy + Into<f64>>(
                     g.color[i][c] += w * drgb[c];
                 }
                 g.depth[i] += w * ddepth;
+                // The features' share of dL/dw and of the "behind" term dt, kept apart for
+                // `opacity_features` (dt is linear in the upstream gradients).
+                let mut dw_f = 0.0;
                 for f in 0..k {
                     let df = up(d_features, pix * k + f);
-                    dw += df * features[i * k + f];
+                    dw_f += df * features[i * k + f];
                     g.features[i * k + f] += w * df;
                 }
+                dw += dw_f;
                 // T_next = T(1−α), w = αT.
                 let dalpha_i = e.t * dw - e.t * dt;
+                let dalpha_f = e.t * dw_f - e.t * dt_f;
                 dt = (1.0 - e.alpha) * dt + e.alpha * dw;
+                dt_f = (1.0 - e.alpha) * dt_f + e.alpha * dw_f;
                 if e.clamped {
                     continue;
                 }
                 // α = o·exp(−σ).
                 g.opacity[i] += dalpha_i * e.gauss;
+                g.opacity_features[i] += dalpha_f * e.gauss;
                 let dsigma = -dalpha_i * e.alpha;
                 let [a, b, c] = proj.conic[i];
                 g.conic[i][0] += dsigma * 0.5 * e.dx * e.dx;

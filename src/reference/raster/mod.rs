@@ -268,6 +268,9 @@ pub struct BlendGrads {
     pub conic: Vec<[f64; 3]>,
     /// Wrt the sigmoid output.
     pub opacity: Vec<f64>,
+    /// The feature channels' share of `opacity` (what `blend_bwd` writes to `grad2d`'s slot
+    /// 12 with `feat_op`): the gradient the features' blend alone passes to the opacity.
+    pub opacity_features: Vec<f64>,
     pub color: Vec<[f64; 3]>,
     pub depth: Vec<f64>,
     /// `[N][K]`.

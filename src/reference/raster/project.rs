@@ -502,12 +502,15 @@ pub fn project_scaled_f64(cam: &Camera, g: &Gaussians64, w: &[f64]) -> Projected
 }
 
 /// Reverse of [`project_scaled_f64`]: [`project_bwd_f64`] with the logits' gradient scaled by
-/// the factor, and ∂L/∂w = ∂L/∂opacity · σ(logit) (0 where culled).
+/// the factor, and ∂L/∂w = ∂L/∂opacity · σ(logit) (0 where culled). `detach_features`: the
+/// factor is a constant in the blend of the feature channels, so ∂L/∂w leaves out
+/// `d.opacity_features` (the logits keep it: `project_bwd` with `feat_detach`).
 pub fn project_scaled_bwd_f64(
     cam: &Camera,
     g: &Gaussians64,
     w: &[f64],
     d: &BlendGrads,
+    detach_features: bool,
 ) -> (ProjectGrads, Vec<f64>) {
     let culled = |i: usize| w[i].is_nan() || w[i] <= 0.0;
     let mut pg = project_bwd_impl(cam, g, culled, d);
@@ -517,7 +520,12 @@ pub fn project_scaled_bwd_f64(
             continue;
         }
         pg.opacity_logits[i] *= w[i];
-        dw[i] = d.opacity[i] * super::sigmoid(g.opacity_logits[i]);
+        let held = if detach_features {
+            d.opacity_features[i]
+        } else {
+            0.0
+        };
+        dw[i] = (d.opacity[i] - held) * super::sigmoid(g.opacity_logits[i]);
     }
     (pg, dw)
 }

@@ -501,7 +501,7 @@ impl MotionTerm {
         let splats = [photo.splats(), inter.splats()];
         let grad2d = [photo.grad2d(), inter.grad2d()];
         kernel.features_bwd(rec, g.n, splats, photo.feature_grads(), grad2d);
-        photo.backward_project(rec, cam, g);
+        photo.backward_project(rec, cam, g, opts);
     }
 
     /// The second render's backward: the reverse order's intermediate (its displacement-flow
@@ -522,7 +522,7 @@ impl MotionTerm {
         let g = self.inter_inputs(model, d, sh);
         let cam = self.inter_camera(pair);
         if let Rep::Gaussian { .. } = self.rep {
-            inter.backward_project(rec, &cam, &g);
+            inter.backward_project(rec, &cam, &g, opts);
             return;
         }
         let Some(zero) = &self.zero_rgba else {

@@ -79,8 +79,14 @@ impl RenderPass {
 
     /// The projection half of [`RenderPass::backward`], from the 2D gradient records as they
     /// stand.
-    pub fn backward_project(&self, rec: &mut Recorder<'_>, cam: &Camera, g: &SplatInputs<'_>) {
-        self.raster.backward_project(rec, &self.bufs, cam, g);
+    pub fn backward_project(
+        &self,
+        rec: &mut Recorder<'_>,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+        o: &RenderOpts,
+    ) {
+        self.raster.backward_project(rec, &self.bufs, cam, g, o);
     }
 
     /// The splat records ([N,3] vec4) of the last projection.
@@ -88,7 +94,7 @@ impl RenderPass {
         self.bufs.splats.all()
     }
 
-    /// The per-splat 2D gradient records ([N,12]).
+    /// The per-splat 2D gradient records ([N, G2D_STRIDE]).
     pub fn grad2d(&self) -> BufSlice<'_> {
         self.bufs.grad2d.all()
     }

@@ -315,6 +315,7 @@ impl Evaluator {
             background: self.background,
             alpha_max: ALPHA_MAX,
             abs_grad: false,
+            detach_feature_weights: false,
         };
         loop {
             let mut rec = Recorder::new(gpu)?;
@@ -444,6 +445,7 @@ impl Evaluator {
             background: self.background,
             alpha_max: ALPHA_MAX,
             abs_grad: false,
+            detach_feature_weights: false,
         };
         let active = view.deform_active;
         self.deform.forward(rec, model, Slot::T1, t, active);
