@@ -323,15 +323,7 @@ fn twin_check(label: &str, scene: &Scene, cam: &Camera, opts: &RenderOpts, tol: 
     let up = Uploaded::new(&gpu, scene);
     let n = scene.len();
     let k = scene.feature_dims;
-    let g = twin::Gaussians {
-        means: &scene.means,
-        scales: &scene.scales,
-        quats: &scene.quats,
-        opacity_logits: &scene.logits,
-        sh: &scene.sh,
-        sh_coeffs: scene.sh_coeffs,
-        sh_degree: scene.sh_degree,
-    };
+    let g = scene.twin();
     let proj = twin::project(cam, &g);
     let bp = twin::BlendParams {
         width: cam.width,
@@ -675,15 +667,7 @@ fn jacobian_clamp_at_a_wide_fov_matches_twin() {
         (h as f32 - cam.cy) / cam.fy + tan(h, cam.fy),
         cam.cy / cam.fy + tan(h, cam.fy),
     );
-    let g = twin::Gaussians {
-        means: &s.means,
-        scales: &s.scales,
-        quats: &s.quats,
-        opacity_logits: &s.logits,
-        sh: &s.sh,
-        sh_coeffs: s.sh_coeffs,
-        sh_degree: s.sh_degree,
-    };
+    let g = s.twin();
     let proj = twin::project(&cam, &g);
     let clamped = (0..s.len())
         .filter(|&i| {

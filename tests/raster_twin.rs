@@ -66,15 +66,7 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
             fv.name()
         );
 
-        let g = twin::Gaussians {
-            means: &scene.means,
-            scales: &scene.scales,
-            quats: &scene.quats,
-            opacity_logits: &scene.logits,
-            sh: &scene.sh,
-            sh_coeffs: scene.sh_coeffs,
-            sh_degree,
-        };
+        let g = scene.twin();
         let tcam = cam;
         let proj = twin::project(&tcam, &g);
         let splats: Vec<[f32; 4]> = gpu
@@ -338,15 +330,7 @@ fn feature_weights_detached_from_the_opacity_factors() {
     let u = upstream(33, px, k as usize);
 
     // The twin, f64 from the same f32 inputs.
-    let g64 = twin::Gaussians64::from_f32(&twin::Gaussians {
-        means: &scene.means,
-        scales: &scene.scales,
-        quats: &scene.quats,
-        opacity_logits: &scene.logits,
-        sh: &scene.sh,
-        sh_coeffs: scene.sh_coeffs,
-        sh_degree: scene.sh_degree,
-    });
+    let g64 = twin::Gaussians64::from_f32(&scene.twin());
     let w64: Vec<f64> = w.iter().map(|&v| v as f64).collect();
     let feats: Vec<f64> = scene.features.iter().map(|&v| v as f64).collect();
     let bp = twin::BlendParams {

@@ -402,15 +402,7 @@ fn the_opacity_factor_through_the_rasteriser() {
     let splats: Vec<[f32; 4]> = gpu
         .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
         .unwrap();
-    let g64 = rtwin::Gaussians64::from_f32(&rtwin::Gaussians {
-        means: &scene.means,
-        scales: &scene.scales,
-        quats: &scene.quats,
-        opacity_logits: &scene.logits,
-        sh: &scene.sh,
-        sh_coeffs: scene.sh_coeffs,
-        sh_degree: scene.sh_degree,
-    });
+    let g64 = rtwin::Gaussians64::from_f32(&scene.twin());
     let w64: Vec<f64> = w.iter().map(|&v| v as f64).collect();
     let proj = rtwin::project_scaled_f64(&cam, &g64, &w64);
     let mut visible = 0;

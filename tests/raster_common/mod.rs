@@ -25,6 +25,18 @@ impl Scene {
     pub fn len(&self) -> usize {
         self.logits.len()
     }
+    /// The scene as the twin's input.
+    pub fn twin(&self) -> dispflow_vk::reference::raster::Gaussians<'_> {
+        dispflow_vk::reference::raster::Gaussians {
+            means: &self.means,
+            scales: &self.scales,
+            quats: &self.quats,
+            opacity_logits: &self.logits,
+            sh: &self.sh,
+            sh_coeffs: self.sh_coeffs,
+            sh_degree: self.sh_degree,
+        }
+    }
     pub fn push(
         &mut self,
         mean: [f32; 3],
