@@ -6,6 +6,7 @@
 //! channels mean (a translated Gaussian flows by its translation, a scaled one by its scale).
 
 use dispflow_vk::kernels::gflow::{GFlowLossIo, GaussianFlow};
+use dispflow_vk::kernels::raster::G2D_STRIDE;
 use dispflow_vk::reference::gflow as twin;
 use dispflow_vk::testing::{self, Noise};
 use dispflow_vk::vk::Recorder;
@@ -80,7 +81,8 @@ fn features_and_backward_match_twin_with_extremes() {
     let (s1, s2) = scene(n, 1, true);
     let mut r = Noise::new(2);
     let d_feat = rand_vec(&mut r, 6 * n, 1.0);
-    let (g1_init, g2_init) = (rand_vec(&mut r, 12 * n, 1.0), rand_vec(&mut r, 12 * n, 1.0));
+    let s = G2D_STRIDE as usize;
+    let (g1_init, g2_init) = (rand_vec(&mut r, s * n, 1.0), rand_vec(&mut r, s * n, 1.0));
     let b4 = |v: &[[f32; 4]]| gpu.buffer_from("splats", v).unwrap();
     let bf = |v: &[f32]| gpu.buffer_from("floats", v).unwrap();
     let (b1, b2, bd) = (b4(&s1), b4(&s2), bf(&d_feat));
@@ -143,9 +145,9 @@ fn features_and_backward_match_twin_with_extremes() {
             .map(|r| r.iter().fold(0.0f64, |m, v| m.max(v.abs())))
             .collect::<Vec<_>>();
         for i in 0..n {
-            for c in 0..12 {
-                let want = init[12 * i + c] as f64 + if c < 5 { tw[i][c] } else { 0.0 };
-                let g = got[12 * i + c] as f64;
+            for c in 0..s {
+                let want = init[s * i + c] as f64 + if c < 5 { tw[i][c] } else { 0.0 };
+                let g = got[s * i + c] as f64;
                 assert!(g.is_finite(), "{name} Gaussian {i} word {c}: {g}");
                 assert!(
                     (g - want).abs() <= 1e-4 * (1.0 + scale[i]) + 1e-6 * want.abs(),
