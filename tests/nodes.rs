@@ -4,7 +4,7 @@
 //! far from every node, a tiny radius, coincident nodes, a NaN mean. The twin itself is
 //! checked against central finite differences in `reference::nodes`.
 
-use dispflow_vk::kernels::nodes::{key_bits, BlendInputs, NodeKernels, NO_NODE};
+use dispflow_vk::kernels::nodes::{key_bits, BlendInputs, GatherShape, NodeKernels, NO_NODE};
 use dispflow_vk::kernels::radix_sort::passes;
 use dispflow_vk::reference::nodes::{nodes_gather, nodes_knn, nodes_lbs, nodes_lbs_bwd, Slot};
 use dispflow_vk::testing::{self, Noise};
@@ -103,6 +103,12 @@ impl Gpu3 {
         Gpu3 { gpu, k }
     }
 
+    fn with_gather(shape: GatherShape) -> Self {
+        let gpu = testing::gpu();
+        let k = NodeKernels::with_gather(&gpu, shape).unwrap();
+        Gpu3 { gpu, k }
+    }
+
     fn buf(&self, name: &str, v: &[f32]) -> Buffer {
         self.gpu.buffer_from(name, v).unwrap()
     }
@@ -174,8 +180,8 @@ fn knn_matches_brute_force_with_ties_few_nodes_and_a_split() {
 
 /// Forward, backward and gather on the GPU against the twin; `split`: through the dynamic
 /// rows (every third Gaussian static).
-fn blend_checked(p: &Problem, k: u32, split: bool, tol: f64) {
-    let g = Gpu3::new();
+fn blend_checked(p: &Problem, k: u32, split: bool, tol: f64, gather: GatherShape) {
+    let g = Gpu3::with_gather(gather);
     let n = p.n();
     let row_of: Vec<u32> = (0..n as u32)
         .map(|i| if split && i % 3 == 0 { NO_NODE } else { i })
@@ -309,9 +315,12 @@ fn blend_checked(p: &Problem, k: u32, split: bool, tol: f64) {
 
 #[test]
 fn blend_forward_backward_and_gather_match_the_twin() {
-    blend_checked(&problem(4, 200, 23), 4, false, 2e-4);
-    blend_checked(&problem(5, 120, 9), 1, false, 2e-4);
-    blend_checked(&problem(6, 150, 17), 8, true, 2e-4);
+    // Both gather shapes (the tree GPUs run, the serial loop CPU devices run) against the twin.
+    for shape in [GatherShape::Tree, GatherShape::Serial] {
+        blend_checked(&problem(4, 200, 23), 4, false, 2e-4, shape);
+        blend_checked(&problem(5, 120, 9), 1, false, 2e-4, shape);
+        blend_checked(&problem(6, 150, 17), 8, true, 2e-4, shape);
+    }
 }
 
 #[test]
@@ -325,7 +334,9 @@ fn extremes_stay_finite() {
     p.nodes[3 * 5] = -30.0;
     p.nodes[3 * 5 + 2] = -30.0;
     p.nodes[3 * 5 + 4] = 30.0;
-    blend_checked(&p, 4, false, 2e-4);
+    for shape in [GatherShape::Tree, GatherShape::Serial] {
+        blend_checked(&p, 4, false, 2e-4, shape);
+    }
     p.means[6..9].copy_from_slice(&[f32::NAN; 3]);
     let g = Gpu3::new();
     let kb = g.gpu.buffer("knn", 6 * 4 * 4).unwrap();

@@ -22,6 +22,8 @@ pub struct KernelSet {
     pub mlp: &'static str,
     pub blend_fwd: &'static str,
     pub blend_bwd: &'static str,
+    /// The control-node field's gradient gather (`DISPFLOW_NODES_GATHER`).
+    pub nodes_gather: &'static str,
 }
 
 /// The choice before issue 14 and the CPU default after it.
@@ -31,12 +33,14 @@ pub const KERNEL_SETS: [KernelSet; 2] = [
         mlp: "tiled",
         blend_fwd: "shared",
         blend_bwd: "subgroup-atomic",
+        nodes_gather: "tree",
     },
     KernelSet {
-        name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd",
+        name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather",
         mlp: "rows",
         blend_fwd: "tile-regs",
         blend_bwd: "tile-accum",
+        nodes_gather: "serial",
     },
 ];
 
@@ -204,6 +208,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
                 std::env::set_var("DISPFLOW_MLP_KERNELS", k.mlp);
                 std::env::set_var("DISPFLOW_BLEND_FWD", k.blend_fwd);
                 std::env::set_var("DISPFLOW_BLEND_BWD", k.blend_bwd);
+                std::env::set_var("DISPFLOW_NODES_GATHER", k.nodes_gather);
                 let mut tr = Trainer::new(gpu, &cfg, &data)?;
                 tr.step(false, false)?; // builds the passes with this kernel set
                 trainers.push(tr);
@@ -211,12 +216,14 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             std::env::remove_var("DISPFLOW_MLP_KERNELS");
             std::env::remove_var("DISPFLOW_BLEND_FWD");
             std::env::remove_var("DISPFLOW_BLEND_BWD");
+            std::env::remove_var("DISPFLOW_NODES_GATHER");
             // The device's own kernel set (as `for_device` picks: CPU-shaped on lavapipe) with a
             // quarter of the Gaussians transient.
             let own = KERNEL_SETS[default_set(gpu)];
             std::env::set_var("DISPFLOW_MLP_KERNELS", own.mlp);
             std::env::set_var("DISPFLOW_BLEND_FWD", own.blend_fwd);
             std::env::set_var("DISPFLOW_BLEND_BWD", own.blend_bwd);
+            std::env::set_var("DISPFLOW_NODES_GATHER", own.nodes_gather);
             let mut detached = cfg.clone();
             detached.transient.motion_weights = MotionWeights::Detached;
             let mut transient_rows = vec![(TRANSIENT_ROW, &cfg)];
@@ -232,6 +239,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             std::env::remove_var("DISPFLOW_MLP_KERNELS");
             std::env::remove_var("DISPFLOW_BLEND_FWD");
             std::env::remove_var("DISPFLOW_BLEND_BWD");
+            std::env::remove_var("DISPFLOW_NODES_GATHER");
             let labels =
                 (KERNEL_SETS.iter().map(|k| k.name)).chain(transient_rows.iter().map(|(l, _)| *l));
             let times = time_interleaved(&mut trainers, warm, steps)?;

@@ -63,7 +63,44 @@ pub struct NodeKernels {
     lbs: ComputePipeline,
     lbs_bwd: ComputePipeline,
     gather: ComputePipeline,
+    /// Which gather shape `gather` is.
+    pub gather_shape: GatherShape,
     sort: RadixSort,
+}
+
+/// The per-node gather's shape: both sum each node's sorted pairs in a fixed order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GatherShape {
+    /// One workgroup per node, strided partial sums and a tree in shared memory (GPUs: a node
+    /// with thousands of pairs spreads over 64 invocations).
+    Tree,
+    /// One invocation per node, a plain loop (CPU devices: lavapipe's barriers and shared
+    /// arrays made the tree 15x slower on the tiny scene, 100 against 6 ms a step).
+    Serial,
+}
+
+impl GatherShape {
+    /// The shape a device runs: serial on CPU devices, the tree elsewhere
+    /// (override: `DISPFLOW_NODES_GATHER=tree|serial`).
+    pub fn for_device(gpu: &Gpu) -> Self {
+        match std::env::var("DISPFLOW_NODES_GATHER").as_deref() {
+            Ok("tree") => return GatherShape::Tree,
+            Ok("serial") => return GatherShape::Serial,
+            _ => {}
+        }
+        if gpu.info.kind == "CPU" {
+            GatherShape::Serial
+        } else {
+            GatherShape::Tree
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            GatherShape::Tree => "tree",
+            GatherShape::Serial => "serial",
+        }
+    }
 }
 
 /// The backward's scratch for `capacity` Gaussians, `max_nodes` nodes and K slots, allocated
@@ -110,6 +147,11 @@ impl<'a> BlendInputs<'a> {
 
 impl NodeKernels {
     pub fn new(gpu: &Gpu) -> Result<Self> {
+        Self::with_gather(gpu, GatherShape::for_device(gpu))
+    }
+
+    /// The kernels with the gather of shape `gather` (tests and benches run both).
+    pub fn with_gather(gpu: &Gpu, gather: GatherShape) -> Result<Self> {
         use shaders::nodes as s;
         Ok(NodeKernels {
             knn: gpu.pipeline(&s::NODES_KNN)?,
@@ -117,7 +159,11 @@ impl NodeKernels {
             ranges: gpu.pipeline(&s::NODES_RANGES)?,
             lbs: gpu.pipeline(&s::NODES_LBS)?,
             lbs_bwd: gpu.pipeline(&s::NODES_LBS_BWD)?,
-            gather: gpu.pipeline(&s::NODES_GATHER)?,
+            gather: gpu.pipeline(match gather {
+                GatherShape::Tree => &s::NODES_GATHER,
+                GatherShape::Serial => &s::NODES_GATHER_SERIAL,
+            })?,
+            gather_shape: gather,
             sort: RadixSort::new(gpu)?,
         })
     }
@@ -272,7 +318,10 @@ impl NodeKernels {
             g_nodes,
         ];
         let outer = rec.set_zone("nodes blend bwd");
-        rec.dispatch(&self.gather, &pc, &binds, [m, 1, 1]);
+        match self.gather_shape {
+            GatherShape::Tree => rec.dispatch(&self.gather, &pc, &binds, [m, 1, 1]),
+            GatherShape::Serial => rec.dispatch_rows(&self.gather, &pc, &binds, m),
+        }
         rec.set_zone(&outer);
     }
 }
