@@ -31,13 +31,14 @@ fn main() -> anyhow::Result<()> {
             let gpu = Gpu::new_default().context("opening the selected device")?;
             println!("\nselected: {:#?}", gpu.info);
             // The per-device kernel choices (override: DISPFLOW_MLP_KERNELS, DISPFLOW_BLEND_FWD,
-            // DISPFLOW_BLEND_BWD, DISPFLOW_NODES_GATHER).
+            // DISPFLOW_BLEND_BWD, DISPFLOW_NODES_GATHER, DISPFLOW_LOSS_BLUR).
             println!(
-                "kernels: MLP {}, blend forward {}, blend backward {}, node gather {}",
+                "kernels: MLP {}, blend forward {}, blend backward {}, node gather {}, loss blur {}",
                 dispflow_vk::kernels::mlp_rows::MlpKernels::for_device(&gpu).name(),
                 dispflow_vk::kernels::raster::BlendFwdVariant::for_device(&gpu.info).name(),
                 dispflow_vk::kernels::raster::BlendBwdVariant::for_device(&gpu.info).name(),
-                dispflow_vk::kernels::nodes::GatherShape::for_device(&gpu).name()
+                dispflow_vk::kernels::nodes::GatherShape::for_device(&gpu).name(),
+                dispflow_vk::kernels::loss::BlurShape::for_device(&gpu).name()
             );
         }
         cli::Command::Bench(args) => {

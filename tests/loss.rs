@@ -1,7 +1,8 @@
 //! Photometric loss: CPU twin vs central finite differences (f64), GPU vs twin on identical
-//! images (values and gradient), and the extremes (identical, flat, 1×1 images).
+//! images (values and gradient), and the extremes (identical, flat, 1×1 images); the GPU
+//! checks run both blur shapes (one pixel per invocation, the CPU devices' runs of 16).
 
-use dispflow_vk::kernels::loss::PhotometricLoss;
+use dispflow_vk::kernels::loss::{BlurShape, PhotometricLoss};
 use dispflow_vk::reference::loss::{photometric_loss, photometric_loss_f64};
 use dispflow_vk::testing::{self, Noise};
 use dispflow_vk::vk::Recorder;
@@ -48,14 +49,17 @@ fn twin_gradient_matches_finite_differences() {
     eprintln!("worst relative FD error {worst:.2e}");
 }
 
+const SHAPES: [BlurShape; 2] = [BlurShape::Pixel, BlurShape::Rows];
+
 fn gpu_loss(
     w: u32,
     h: u32,
     x: &[[f32; 4]],
     y: &[[f32; 4]],
+    blur: BlurShape,
 ) -> (dispflow_vk::kernels::loss::LossValues, Vec<[f32; 4]>) {
     let gpu = testing::gpu();
-    let loss = PhotometricLoss::new(&gpu).unwrap();
+    let loss = PhotometricLoss::with_blur(&gpu, blur).unwrap();
     let mut b = loss.buffers(&gpu, w, h).unwrap();
     let xb = gpu.buffer_from("render", x).unwrap();
     let yb = gpu.buffer_from("target", y).unwrap();
@@ -69,13 +73,21 @@ fn gpu_loss(
 
 #[test]
 fn gpu_matches_twin() {
-    for (seed, w, h) in [(1u64, 1u32, 1u32), (2, 17, 13), (3, 64, 48), (4, 5, 40)] {
+    // Widths and heights below, at and across the rows blur's 16-pixel runs.
+    let sizes = [
+        (1u64, 1u32, 1u32),
+        (2, 17, 13),
+        (3, 64, 48),
+        (4, 5, 40),
+        (5, 33, 16),
+    ];
+    for ((seed, w, h), blur) in sizes.into_iter().flat_map(|s| SHAPES.map(|b| (s, b))) {
         let n = (w * h) as usize;
         let x = image(seed, n);
         let y = image(seed + 50, n);
-        let (gv, gg) = gpu_loss(w, h, &x, &y);
+        let (gv, gg) = gpu_loss(w, h, &x, &y, blur);
         let (tv, tg) = photometric_loss(&x, &y, w as usize, h as usize, 0.2);
-        let ctx = format!("{w}x{h}");
+        let ctx = format!("{w}x{h} {blur:?}");
         for (name, a, b) in [
             ("l1", gv.l1, tv.l1),
             ("mse", gv.mse, tv.mse),
@@ -107,9 +119,15 @@ fn gpu_matches_twin() {
 
 #[test]
 fn identical_and_flat_images_are_finite() {
+    for blur in SHAPES {
+        identical_and_flat(blur);
+    }
+}
+
+fn identical_and_flat(blur: BlurShape) {
     let (w, h) = (23, 19);
     let x = image(9, w * h);
-    let (v, g) = gpu_loss(w as u32, h as u32, &x, &x);
+    let (v, g) = gpu_loss(w as u32, h as u32, &x, &x, blur);
     assert!(
         (v.ssim - 1.0).abs() < 1e-5 && v.l1 == 0.0 && v.mse == 0.0,
         "{v:?}"
@@ -122,7 +140,7 @@ fn identical_and_flat_images_are_finite() {
     // Flat images (zero variance everywhere): SSIM stays finite thanks to C1, C2.
     let flat = vec![[0.5f32; 4]; w * h];
     let black = vec![[0.0f32; 4]; w * h];
-    let (v, g) = gpu_loss(w as u32, h as u32, &flat, &black);
+    let (v, g) = gpu_loss(w as u32, h as u32, &flat, &black, blur);
     assert!(
         v.ssim.is_finite() && v.loss.is_finite() && g.iter().flatten().all(|d| d.is_finite()),
         "{v:?}"

@@ -4,6 +4,8 @@
 #define LOSS_GLSL
 
 #define SSIM_RADIUS 5
+// Pixels per invocation of the CPU-shaped blurs (blur_h_rows, blur_v_rows).
+#define BLUR_RUN 16
 #define SSIM_C1 (0.01 * 0.01)
 #define SSIM_C2 (0.03 * 0.03)
 // Partial sums per workgroup: [L1 sum, squared-error sum, SSIM sum, unused].

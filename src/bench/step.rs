@@ -24,6 +24,8 @@ pub struct KernelSet {
     pub blend_bwd: &'static str,
     /// The control-node field's gradient gather (`DISPFLOW_NODES_GATHER`).
     pub nodes_gather: &'static str,
+    /// The SSIM loss's separable blur (`DISPFLOW_LOSS_BLUR`).
+    pub loss_blur: &'static str,
 }
 
 /// The choice before issue 14 and the CPU default after it.
@@ -34,13 +36,16 @@ pub const KERNEL_SETS: [KernelSet; 2] = [
         blend_fwd: "shared",
         blend_bwd: "subgroup-atomic",
         nodes_gather: "tree",
+        loss_blur: "pixel",
     },
     KernelSet {
-        name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather",
+        name:
+            "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather + rows blur",
         mlp: "rows",
         blend_fwd: "tile-regs",
         blend_bwd: "tile-accum",
         nodes_gather: "serial",
+        loss_blur: "rows",
     },
 ];
 
@@ -209,6 +214,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
                 std::env::set_var("DISPFLOW_BLEND_FWD", k.blend_fwd);
                 std::env::set_var("DISPFLOW_BLEND_BWD", k.blend_bwd);
                 std::env::set_var("DISPFLOW_NODES_GATHER", k.nodes_gather);
+                std::env::set_var("DISPFLOW_LOSS_BLUR", k.loss_blur);
                 let mut tr = Trainer::new(gpu, &cfg, &data)?;
                 tr.step(false, false)?; // builds the passes with this kernel set
                 trainers.push(tr);
@@ -217,6 +223,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             std::env::remove_var("DISPFLOW_BLEND_FWD");
             std::env::remove_var("DISPFLOW_BLEND_BWD");
             std::env::remove_var("DISPFLOW_NODES_GATHER");
+            std::env::remove_var("DISPFLOW_LOSS_BLUR");
             // The device's own kernel set (as `for_device` picks: CPU-shaped on lavapipe) with a
             // quarter of the Gaussians transient.
             let own = KERNEL_SETS[default_set(gpu)];
@@ -224,6 +231,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             std::env::set_var("DISPFLOW_BLEND_FWD", own.blend_fwd);
             std::env::set_var("DISPFLOW_BLEND_BWD", own.blend_bwd);
             std::env::set_var("DISPFLOW_NODES_GATHER", own.nodes_gather);
+            std::env::set_var("DISPFLOW_LOSS_BLUR", own.loss_blur);
             let mut detached = cfg.clone();
             detached.transient.motion_weights = MotionWeights::Detached;
             let mut transient_rows = vec![(TRANSIENT_ROW, &cfg)];
@@ -240,6 +248,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             std::env::remove_var("DISPFLOW_BLEND_FWD");
             std::env::remove_var("DISPFLOW_BLEND_BWD");
             std::env::remove_var("DISPFLOW_NODES_GATHER");
+            std::env::remove_var("DISPFLOW_LOSS_BLUR");
             let labels =
                 (KERNEL_SETS.iter().map(|k| k.name)).chain(transient_rows.iter().map(|(l, _)| *l));
             let times = time_interleaved(&mut trainers, warm, steps)?;

@@ -63,7 +63,46 @@ pub struct PhotometricLoss {
     blur_v: ComputePipeline,
     ssim_map: ComputePipeline,
     grad: ComputePipeline,
+    /// Which blur shape `blur_h` and `blur_v` are.
+    pub blur: BlurShape,
 }
+
+/// The separable blur's shape: both sum the same taps in the same order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlurShape {
+    /// One pixel per invocation (`blur_h`, `blur_v`): coalesced loads on GPUs.
+    Pixel,
+    /// A run of 16 pixels per invocation from a private array (`blur_h_rows`, `blur_v_rows`):
+    /// on lavapipe each storage load is a per-lane loop, and this shape loads 26 values per
+    /// 16 outputs instead of 11 per output.
+    Rows,
+}
+
+impl BlurShape {
+    /// Rows on CPU devices, pixels elsewhere (override: `DISPFLOW_LOSS_BLUR=pixel|rows`).
+    pub fn for_device(gpu: &Gpu) -> Self {
+        match std::env::var("DISPFLOW_LOSS_BLUR").as_deref() {
+            Ok("pixel") => return BlurShape::Pixel,
+            Ok("rows") => return BlurShape::Rows,
+            _ => {}
+        }
+        if gpu.info.kind == "CPU" {
+            BlurShape::Rows
+        } else {
+            BlurShape::Pixel
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            BlurShape::Pixel => "pixel",
+            BlurShape::Rows => "rows",
+        }
+    }
+}
+
+/// Pixels per invocation of the rows blurs (mirrors `BLUR_RUN` in glsl/include/loss.glsl).
+const BLUR_RUN: u32 = 16;
 
 /// Scratch for one image size, allocated once.
 pub struct LossBuffers {
@@ -107,14 +146,48 @@ impl LossBuffers {
 
 impl PhotometricLoss {
     pub fn new(gpu: &Gpu) -> Result<Self> {
+        Self::with_blur(gpu, BlurShape::for_device(gpu))
+    }
+
+    /// The loss with the blur of shape `blur` (tests run both).
+    pub fn with_blur(gpu: &Gpu, blur: BlurShape) -> Result<Self> {
         use shaders::loss as l;
+        let (h, v) = match blur {
+            BlurShape::Pixel => (&l::BLUR_H, &l::BLUR_V),
+            BlurShape::Rows => (&l::BLUR_H_ROWS, &l::BLUR_V_ROWS),
+        };
         Ok(PhotometricLoss {
             products: gpu.pipeline(&l::SSIM_PRODUCTS)?,
-            blur_h: gpu.pipeline(&l::BLUR_H)?,
-            blur_v: gpu.pipeline(&l::BLUR_V)?,
+            blur_h: gpu.pipeline(h)?,
+            blur_v: gpu.pipeline(v)?,
             ssim_map: gpu.pipeline(&l::SSIM_MAP)?,
             grad: gpu.pipeline(&l::LOSS_GRAD)?,
+            blur,
         })
+    }
+
+    /// Records the separable blur of `planes` planes: `src` → `tmp` (h) → `dst` (v).
+    fn record_blur(
+        &self,
+        rec: &mut Recorder<'_>,
+        pc: &LossParams,
+        src: BufSlice<'_>,
+        tmp: BufSlice<'_>,
+        dst: BufSlice<'_>,
+    ) {
+        let (w, h, planes) = (pc.width, pc.height, pc.planes);
+        match self.blur {
+            BlurShape::Pixel => {
+                rec.dispatch_threads(&self.blur_h, pc, &[src, tmp], [w, h, planes]);
+                rec.dispatch_threads(&self.blur_v, pc, &[tmp, dst], [w, h, planes]);
+            }
+            BlurShape::Rows => {
+                let rows_h = w.div_ceil(BLUR_RUN) * h * planes;
+                let rows_v = w * h.div_ceil(BLUR_RUN) * planes;
+                rec.dispatch_rows(&self.blur_h, pc, &[src, tmp], rows_h);
+                rec.dispatch_rows(&self.blur_v, pc, &[tmp, dst], rows_v);
+            }
+        }
     }
 
     pub fn buffers(&self, gpu: &Gpu, width: u32, height: u32) -> Result<LossBuffers> {
@@ -163,18 +236,7 @@ impl PhotometricLoss {
             &[render, target, b.planes.all()],
             [hw, 1, 1],
         );
-        rec.dispatch_threads(
-            &self.blur_h,
-            &pc(15),
-            &[b.planes.all(), b.tmp.all()],
-            [w, h, 15],
-        );
-        rec.dispatch_threads(
-            &self.blur_v,
-            &pc(15),
-            &[b.tmp.all(), b.stats.all()],
-            [w, h, 15],
-        );
+        self.record_blur(rec, &pc(15), b.planes.all(), b.tmp.all(), b.stats.all());
         // The 9 partial maps reuse `planes`; their blurs reuse `tmp` and `stats`.
         rec.dispatch_threads(
             &self.ssim_map,
@@ -182,18 +244,7 @@ impl PhotometricLoss {
             &[b.stats.all(), b.planes.all(), b.sums.all()],
             [hw, 1, 1],
         );
-        rec.dispatch_threads(
-            &self.blur_h,
-            &pc(9),
-            &[b.planes.all(), b.tmp.all()],
-            [w, h, 9],
-        );
-        rec.dispatch_threads(
-            &self.blur_v,
-            &pc(9),
-            &[b.tmp.all(), b.stats.all()],
-            [w, h, 9],
-        );
+        self.record_blur(rec, &pc(9), b.planes.all(), b.tmp.all(), b.stats.all());
         rec.dispatch_threads(
             &self.grad,
             &pc(9),
