@@ -13,7 +13,7 @@ use std::time::Duration;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use dispflow_vk::bench::raster_scenes::RasterScene;
 use dispflow_vk::bench::RasterCase;
-use dispflow_vk::kernels::raster::BlendBwdVariant;
+use dispflow_vk::kernels::raster::{BlendBwdVariant, DeviceShape};
 use dispflow_vk::vk::Gpu;
 
 fn benches(c: &mut Criterion) {

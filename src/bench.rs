@@ -9,8 +9,8 @@
 use crate::error::{Error, Result};
 use crate::kernels::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use crate::kernels::raster::{
-    split_sh, BlendBwdVariant, BlendFwdVariant, Camera, OutputGrads, RasterBuffers, RasterSize,
-    Rasterizer, RenderOpts, SplatInputs,
+    split_sh, BlendBwdVariant, BlendFwdVariant, Camera, DeviceShape, OutputGrads, RasterBuffers,
+    RasterSize, Rasterizer, RenderOpts, SplatInputs,
 };
 use crate::kernels::scan::{Count, PrefixSum, ScanScratch};
 use crate::reference;

@@ -30,16 +30,10 @@ fn main() -> anyhow::Result<()> {
             }
             let gpu = Gpu::new_default().context("opening the selected device")?;
             println!("\nselected: {:#?}", gpu.info);
-            // The per-device kernel choices (override: DISPFLOW_MLP_KERNELS, DISPFLOW_BLEND_FWD,
-            // DISPFLOW_BLEND_BWD, DISPFLOW_NODES_GATHER, DISPFLOW_LOSS_BLUR).
-            println!(
-                "kernels: MLP {}, blend forward {}, blend backward {}, node gather {}, loss blur {}",
-                dispflow_vk::kernels::mlp_rows::MlpKernels::for_device(&gpu).name(),
-                dispflow_vk::kernels::raster::BlendFwdVariant::for_device(&gpu.info).name(),
-                dispflow_vk::kernels::raster::BlendBwdVariant::for_device(&gpu.info).name(),
-                dispflow_vk::kernels::nodes::GatherShape::for_device(&gpu).name(),
-                dispflow_vk::kernels::loss::BlurShape::for_device(&gpu).name()
-            );
+            println!("kernels (each overridden by its variable):");
+            for (what, shape, env) in dispflow_vk::kernels::shape::device_choices(&gpu.info) {
+                println!("  {what}: {shape} ({env})");
+            }
         }
         cli::Command::Bench(args) => {
             dispflow_vk::bench::run(&args)?;

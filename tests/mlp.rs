@@ -19,7 +19,7 @@
 
 use dispflow_vk::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
 use dispflow_vk::kernels::mlp_fused::{MlpFused, Precision};
-use dispflow_vk::kernels::mlp_rows::MlpKernels;
+use dispflow_vk::kernels::mlp_rows::{DeviceShape, MlpKernels};
 use dispflow_vk::model::deform::{MlpConfig, MlpLayout, TimeEncoding};
 use dispflow_vk::reference::mlp::{self as twin, Activations, Times};
 use dispflow_vk::testing::{self, Noise};
@@ -876,7 +876,7 @@ fn more_rows_than_the_device_binding_range_match_twin() {
         return; // chunking is host logic; the 64-row chunk test covers other widths
     }
     let c = Case::new(cfg, n, 61, 1.5, true);
-    let kern = MlpKernels::for_device(&gpu);
+    let kern = MlpKernels::for_device(&gpu.info);
     let (ef, eb) = check_layerwise(&gpu, &c, true, kern);
     eprintln!("{kern:?} 1x256, {n} rows: fwd {ef:.2e}, bwd {eb:.2e}");
 }

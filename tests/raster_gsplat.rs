@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use dispflow_vk::kernels::raster::{
-    join_sh, split_sh, BlendBwdVariant, BlendFwdVariant, Camera, OutputGrads, RasterSize,
-    Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
+    join_sh, split_sh, BlendBwdVariant, BlendFwdVariant, Camera, DeviceShape, OutputGrads,
+    RasterSize, Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
 };
 use dispflow_vk::testing;
 use dispflow_vk::vk::Recorder;

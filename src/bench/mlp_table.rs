@@ -5,7 +5,7 @@
 use super::step::fma_peak;
 use super::{mlp_row, BenchRow, MlpImpl};
 use crate::error::Result;
-use crate::kernels::mlp_rows::MlpKernels;
+use crate::kernels::mlp_rows::{DeviceShape, MlpKernels};
 use crate::model::deform::{MlpConfig, TimeEncoding};
 use crate::vk::Gpu;
 

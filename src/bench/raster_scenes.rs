@@ -6,7 +6,7 @@ use super::{median, BenchRow, RasterCase};
 use crate::data::synthetic::{sample_points, GenCamera};
 use crate::error::{Error, Result};
 use crate::kernels::raster::G2D_STRIDE;
-use crate::kernels::raster::{BlendBwdVariant, BlendFwdVariant, Camera};
+use crate::kernels::raster::{BlendBwdVariant, BlendFwdVariant, Camera, DeviceShape};
 use crate::testing::Noise;
 use crate::vk::Gpu;
 

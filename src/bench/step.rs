@@ -26,6 +26,37 @@ pub struct KernelSet {
     pub nodes_gather: &'static str,
     /// The SSIM loss's separable blur (`DISPFLOW_LOSS_BLUR`).
     pub loss_blur: &'static str,
+    /// The radix sort's digit passes (`DISPFLOW_SORT`).
+    pub sort: &'static str,
+}
+
+impl KernelSet {
+    /// Each choice with the variable that carries it.
+    fn vars(&self) -> [(&'static str, &'static str); 6] {
+        use crate::kernels::{loss, mlp_rows, nodes, radix_sort, raster, shape::DeviceShape};
+        [
+            (mlp_rows::MlpKernels::ENV, self.mlp),
+            (raster::BlendFwdVariant::ENV, self.blend_fwd),
+            (raster::BlendBwdVariant::ENV, self.blend_bwd),
+            (nodes::GatherShape::ENV, self.nodes_gather),
+            (loss::BlurShape::ENV, self.loss_blur),
+            (radix_sort::SortShape::ENV, self.sort),
+        ]
+    }
+
+    /// Sets the override variables, so passes built next run this set.
+    fn apply(&self) {
+        for (var, v) in self.vars() {
+            std::env::set_var(var, v);
+        }
+    }
+
+    /// Removes the override variables (the device's choices apply again).
+    fn clear_all() {
+        for (var, _) in KERNEL_SETS[0].vars() {
+            std::env::remove_var(var);
+        }
+    }
 }
 
 /// The choice before issue 14 and the CPU default after it.
@@ -37,15 +68,17 @@ pub const KERNEL_SETS: [KernelSet; 2] = [
         blend_bwd: "subgroup-atomic",
         nodes_gather: "tree",
         loss_blur: "pixel",
+        sort: "block",
     },
     KernelSet {
-        name:
-            "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather + rows blur",
+        name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather + rows \
+               blur + serial sort",
         mlp: "rows",
         blend_fwd: "tile-regs",
         blend_bwd: "tile-accum",
         nodes_gather: "serial",
         loss_blur: "rows",
+        sort: "serial",
     },
 ];
 
@@ -210,28 +243,16 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
             let data = data::load(&dir, &cfg.load_options())?;
             let mut trainers = Vec::new();
             for k in KERNEL_SETS {
-                std::env::set_var("DISPFLOW_MLP_KERNELS", k.mlp);
-                std::env::set_var("DISPFLOW_BLEND_FWD", k.blend_fwd);
-                std::env::set_var("DISPFLOW_BLEND_BWD", k.blend_bwd);
-                std::env::set_var("DISPFLOW_NODES_GATHER", k.nodes_gather);
-                std::env::set_var("DISPFLOW_LOSS_BLUR", k.loss_blur);
+                k.apply();
                 let mut tr = Trainer::new(gpu, &cfg, &data)?;
                 tr.step(false, false)?; // builds the passes with this kernel set
                 trainers.push(tr);
             }
-            std::env::remove_var("DISPFLOW_MLP_KERNELS");
-            std::env::remove_var("DISPFLOW_BLEND_FWD");
-            std::env::remove_var("DISPFLOW_BLEND_BWD");
-            std::env::remove_var("DISPFLOW_NODES_GATHER");
-            std::env::remove_var("DISPFLOW_LOSS_BLUR");
+            KernelSet::clear_all();
             // The device's own kernel set (as `for_device` picks: CPU-shaped on lavapipe) with a
             // quarter of the Gaussians transient.
             let own = KERNEL_SETS[default_set(gpu)];
-            std::env::set_var("DISPFLOW_MLP_KERNELS", own.mlp);
-            std::env::set_var("DISPFLOW_BLEND_FWD", own.blend_fwd);
-            std::env::set_var("DISPFLOW_BLEND_BWD", own.blend_bwd);
-            std::env::set_var("DISPFLOW_NODES_GATHER", own.nodes_gather);
-            std::env::set_var("DISPFLOW_LOSS_BLUR", own.loss_blur);
+            own.apply();
             let mut detached = cfg.clone();
             detached.transient.motion_weights = MotionWeights::Detached;
             let mut transient_rows = vec![(TRANSIENT_ROW, &cfg)];
@@ -244,11 +265,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
                 make_quarter_transient(&mut tr)?;
                 trainers.push(tr);
             }
-            std::env::remove_var("DISPFLOW_MLP_KERNELS");
-            std::env::remove_var("DISPFLOW_BLEND_FWD");
-            std::env::remove_var("DISPFLOW_BLEND_BWD");
-            std::env::remove_var("DISPFLOW_NODES_GATHER");
-            std::env::remove_var("DISPFLOW_LOSS_BLUR");
+            KernelSet::clear_all();
             let labels =
                 (KERNEL_SETS.iter().map(|k| k.name)).chain(transient_rows.iter().map(|(l, _)| *l));
             let times = time_interleaved(&mut trainers, warm, steps)?;

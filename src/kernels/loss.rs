@@ -10,6 +10,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
+pub use super::shape::DeviceShape;
 use crate::error::Result;
 use crate::shaders;
 use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
@@ -78,22 +79,14 @@ pub enum BlurShape {
     Rows,
 }
 
-impl BlurShape {
-    /// Rows on CPU devices, pixels elsewhere (override: `DISPFLOW_LOSS_BLUR=pixel|rows`).
-    pub fn for_device(gpu: &Gpu) -> Self {
-        match std::env::var("DISPFLOW_LOSS_BLUR").as_deref() {
-            Ok("pixel") => return BlurShape::Pixel,
-            Ok("rows") => return BlurShape::Rows,
-            _ => {}
-        }
-        if gpu.info.kind == "CPU" {
-            BlurShape::Rows
-        } else {
-            BlurShape::Pixel
-        }
-    }
+/// Rows on CPU devices, pixels elsewhere (override: `DISPFLOW_LOSS_BLUR=pixel|rows`).
+impl DeviceShape for BlurShape {
+    const ENV: &'static str = "DISPFLOW_LOSS_BLUR";
+    const ALL: &'static [Self] = &[BlurShape::Pixel, BlurShape::Rows];
+    const CPU: Self = BlurShape::Rows;
+    const GPU: Self = BlurShape::Pixel;
 
-    pub fn name(self) -> &'static str {
+    fn name(self) -> &'static str {
         match self {
             BlurShape::Pixel => "pixel",
             BlurShape::Rows => "rows",
@@ -146,7 +139,7 @@ impl LossBuffers {
 
 impl PhotometricLoss {
     pub fn new(gpu: &Gpu) -> Result<Self> {
-        Self::with_blur(gpu, BlurShape::for_device(gpu))
+        Self::with_blur(gpu, BlurShape::for_device(&gpu.info))
     }
 
     /// The loss with the blur of shape `blur` (tests run both).

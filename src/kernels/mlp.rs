@@ -19,7 +19,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::mlp_rows::{Gemv, MlpKernels, RowsPath};
+use super::mlp_rows::{DeviceShape, Gemv, MlpKernels, RowsPath};
 use crate::error::{Error, Result};
 use crate::model::deform::{LinearSpec, MlpConfig, MlpLayout, OUT_DIMS};
 use crate::shaders;
@@ -254,7 +254,7 @@ fn chunking(n: u32) -> (u32, u32) {
 impl Mlp {
     /// The kernels [`MlpKernels::for_device`] picks.
     pub fn new(gpu: &Gpu, cfg: &MlpConfig) -> Result<Self> {
-        Self::with_kernels(gpu, cfg, MlpKernels::for_device(gpu))
+        Self::with_kernels(gpu, cfg, MlpKernels::for_device(&gpu.info))
     }
 
     pub fn with_kernels(gpu: &Gpu, cfg: &MlpConfig, kernels: MlpKernels) -> Result<Self> {

@@ -10,6 +10,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
+pub use super::shape::DeviceShape;
 use crate::error::Result;
 use crate::shaders;
 use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
@@ -73,19 +74,15 @@ pub enum MlpKernels {
     Rows,
 }
 
-impl MlpKernels {
-    /// `DISPFLOW_MLP_KERNELS=tiled|rows` when set, else by device type: the register path on
-    /// CPU devices (measured 6–10× faster there, see `cargo bench --bench mlp`), tiles on GPUs.
-    pub fn for_device(gpu: &Gpu) -> Self {
-        match std::env::var("DISPFLOW_MLP_KERNELS").as_deref() {
-            Ok("tiled") => MlpKernels::Tiled,
-            Ok("rows") => MlpKernels::Rows,
-            _ if gpu.info.kind == "CPU" => MlpKernels::Rows,
-            _ => MlpKernels::Tiled,
-        }
-    }
+/// `DISPFLOW_MLP_KERNELS=tiled|rows` when set, else by device type: the register path on
+/// CPU devices (measured 6–10× faster there, see `cargo bench --bench mlp`), tiles on GPUs.
+impl DeviceShape for MlpKernels {
+    const ENV: &'static str = "DISPFLOW_MLP_KERNELS";
+    const ALL: &'static [Self] = &[MlpKernels::Tiled, MlpKernels::Rows];
+    const CPU: Self = MlpKernels::Rows;
+    const GPU: Self = MlpKernels::Tiled;
 
-    pub fn name(self) -> &'static str {
+    fn name(self) -> &'static str {
         match self {
             MlpKernels::Tiled => "tiled",
             MlpKernels::Rows => "rows",

@@ -19,6 +19,7 @@ pub mod nodes;
 pub mod radix_sort;
 pub mod raster;
 pub mod scan;
+pub mod shape;
 pub mod sparse;
 pub mod temporal;
 

@@ -8,6 +8,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use super::scan::Count;
+pub use super::shape::DeviceShape;
 use crate::error::{Error, Result};
 use crate::shaders;
 use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
@@ -79,23 +80,15 @@ pub enum GatherShape {
     Serial,
 }
 
-impl GatherShape {
-    /// The shape a device runs: serial on CPU devices, the tree elsewhere
-    /// (override: `DISPFLOW_NODES_GATHER=tree|serial`).
-    pub fn for_device(gpu: &Gpu) -> Self {
-        match std::env::var("DISPFLOW_NODES_GATHER").as_deref() {
-            Ok("tree") => return GatherShape::Tree,
-            Ok("serial") => return GatherShape::Serial,
-            _ => {}
-        }
-        if gpu.info.kind == "CPU" {
-            GatherShape::Serial
-        } else {
-            GatherShape::Tree
-        }
-    }
+/// The shape a device runs: serial on CPU devices, the tree elsewhere
+/// (override: `DISPFLOW_NODES_GATHER=tree|serial`).
+impl DeviceShape for GatherShape {
+    const ENV: &'static str = "DISPFLOW_NODES_GATHER";
+    const ALL: &'static [Self] = &[GatherShape::Tree, GatherShape::Serial];
+    const CPU: Self = GatherShape::Serial;
+    const GPU: Self = GatherShape::Tree;
 
-    pub fn name(self) -> &'static str {
+    fn name(self) -> &'static str {
         match self {
             GatherShape::Tree => "tree",
             GatherShape::Serial => "serial",
@@ -147,7 +140,7 @@ impl<'a> BlendInputs<'a> {
 
 impl NodeKernels {
     pub fn new(gpu: &Gpu) -> Result<Self> {
-        Self::with_gather(gpu, GatherShape::for_device(gpu))
+        Self::with_gather(gpu, GatherShape::for_device(&gpu.info))
     }
 
     /// The kernels with the gather of shape `gather` (tests and benches run both).

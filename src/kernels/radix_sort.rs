@@ -5,11 +5,13 @@
 //! the key (the rasteriser sorts only `tile_bits + depth_bits`). Per pass: `radix_hist` (digit
 //! histogram per 2048-key block, digit-major) → exclusive scan of the histogram → `radix_scatter`
 //! (stable rank within the block). The key count may live on the GPU; every per-pass dispatch is
-//! indirect on the block count computed by `sort_setup`.
+//! indirect on the block count computed by `sort_setup`. Two shapes of `radix_hist` and
+//! `radix_scatter` ([`SortShape`]) give the same output.
 
 use bytemuck::{Pod, Zeroable};
 
 use super::scan::{Count, PrefixSum, ScanScratch};
+pub use super::shape::DeviceShape;
 use crate::error::{Error, Result};
 use crate::shaders;
 use crate::vk::{Buffer, ComputePipeline, Gpu, Recorder};
@@ -47,7 +49,35 @@ impl KeyWidth {
     }
 }
 
+/// The digit passes' shape. Both write the same histogram and the same stable order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SortShape {
+    /// 256 invocations per block: shared-memory atomics for the histogram, a shared-memory scan
+    /// of a 16 × 256 count table for the ranks (GPUs).
+    Block,
+    /// One invocation per block, a plain loop over its 2048 keys with 16 counters in a private
+    /// array (CPU devices: lavapipe runs the block shape's barriers and shared arrays per lane).
+    Serial,
+}
+
+/// Serial on CPU devices, blocks elsewhere (`DISPFLOW_SORT=block|serial` overrides).
+impl DeviceShape for SortShape {
+    const ENV: &'static str = "DISPFLOW_SORT";
+    const ALL: &'static [Self] = &[SortShape::Block, SortShape::Serial];
+    const CPU: Self = SortShape::Serial;
+    const GPU: Self = SortShape::Block;
+
+    fn name(self) -> &'static str {
+        match self {
+            SortShape::Block => "block",
+            SortShape::Serial => "serial",
+        }
+    }
+}
+
 pub struct RadixSort {
+    /// Which shape `hist` and `scatter` are.
+    pub shape: SortShape,
     setup: ComputePipeline,
     hist: [ComputePipeline; 2],
     scatter: [ComputePipeline; 2],
@@ -83,17 +113,28 @@ pub fn passes(bits: u32) -> u32 {
 }
 
 impl RadixSort {
+    /// The shape [`SortShape::for_device`] picks.
     pub fn new(gpu: &Gpu) -> Result<Self> {
+        Self::with_shape(gpu, SortShape::for_device(&gpu.info))
+    }
+
+    pub fn with_shape(gpu: &Gpu, shape: SortShape) -> Result<Self> {
+        use shaders::sort as s;
+        let (hist, scatter) = match shape {
+            SortShape::Block => (
+                [&s::RADIX_HIST_U32, &s::RADIX_HIST_U64],
+                [&s::RADIX_SCATTER_U32, &s::RADIX_SCATTER_U64],
+            ),
+            SortShape::Serial => (
+                [&s::RADIX_HIST_SERIAL_U32, &s::RADIX_HIST_SERIAL_U64],
+                [&s::RADIX_SCATTER_SERIAL_U32, &s::RADIX_SCATTER_SERIAL_U64],
+            ),
+        };
         Ok(RadixSort {
-            setup: gpu.pipeline(&shaders::sort::SORT_SETUP)?,
-            hist: [
-                gpu.pipeline(&shaders::sort::RADIX_HIST_U32)?,
-                gpu.pipeline(&shaders::sort::RADIX_HIST_U64)?,
-            ],
-            scatter: [
-                gpu.pipeline(&shaders::sort::RADIX_SCATTER_U32)?,
-                gpu.pipeline(&shaders::sort::RADIX_SCATTER_U64)?,
-            ],
+            shape,
+            setup: gpu.pipeline(&s::SORT_SETUP)?,
+            hist: [gpu.pipeline(hist[0])?, gpu.pipeline(hist[1])?],
+            scatter: [gpu.pipeline(scatter[0])?, gpu.pipeline(scatter[1])?],
             scan: PrefixSum::new(gpu)?,
         })
     }

@@ -19,6 +19,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use super::scan::{Count, PrefixSum, ScanScratch};
+pub use super::shape::DeviceShape;
 use crate::error::{Error, Result};
 use crate::shaders;
 use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
@@ -310,26 +311,20 @@ pub enum BlendBwdVariant {
 impl BlendBwdVariant {
     pub const ALL: [BlendBwdVariant; 2] =
         [BlendBwdVariant::SubgroupAtomic, BlendBwdVariant::TileAccum];
+}
 
-    /// The default for a device: per-tile accumulation on CPU devices (lavapipe: 10–14× the
-    /// subgroup kernel on the issue-14 scenes, `bench --suite raster`); the subgroup kernel on
-    /// GPUs, where an 8-invocation workgroup per tile leaves most of a warp idle (the whole
-    /// CPU-shaped step measured 6.8–7.9× slower on an H200, docs/gpu_h200.md).
-    /// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum` overrides the choice (benches, tests).
-    pub fn for_device(info: &crate::vk::DeviceInfo) -> Self {
-        match std::env::var("DISPFLOW_BLEND_BWD").as_deref() {
-            Ok("subgroup-atomic") => return BlendBwdVariant::SubgroupAtomic,
-            Ok("tile-accum") => return BlendBwdVariant::TileAccum,
-            _ => {}
-        }
-        if info.kind == "CPU" {
-            BlendBwdVariant::TileAccum
-        } else {
-            BlendBwdVariant::SubgroupAtomic
-        }
-    }
+/// The default for a device: per-tile accumulation on CPU devices (lavapipe: 10–14× the
+/// subgroup kernel on the issue-14 scenes, `bench --suite raster`); the subgroup kernel on
+/// GPUs, where an 8-invocation workgroup per tile leaves most of a warp idle (the whole
+/// CPU-shaped step measured 6.8–7.9× slower on an H200, docs/gpu_h200.md).
+/// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum` overrides the choice (benches, tests).
+impl DeviceShape for BlendBwdVariant {
+    const ENV: &'static str = "DISPFLOW_BLEND_BWD";
+    const ALL: &'static [Self] = &BlendBwdVariant::ALL;
+    const CPU: Self = BlendBwdVariant::TileAccum;
+    const GPU: Self = BlendBwdVariant::SubgroupAtomic;
 
-    pub fn name(self) -> &'static str {
+    fn name(self) -> &'static str {
         match self {
             BlendBwdVariant::SubgroupAtomic => "subgroup-atomic",
             BlendBwdVariant::TileAccum => "tile-accum",
@@ -353,25 +348,19 @@ pub enum BlendFwdVariant {
 
 impl BlendFwdVariant {
     pub const ALL: [BlendFwdVariant; 2] = [BlendFwdVariant::Shared, BlendFwdVariant::TileRegs];
+}
 
-    /// The default for a device: pixels in registers on CPU devices (lavapipe, `bench --suite
-    /// raster`); the shared-memory kernel on GPUs, where an 8-invocation workgroup per tile
-    /// leaves most of a warp idle (measured on an H200 with the backward: docs/gpu_h200.md).
-    /// `DISPFLOW_BLEND_FWD=shared|tile-regs` overrides the choice (benches, tests).
-    pub fn for_device(info: &crate::vk::DeviceInfo) -> Self {
-        match std::env::var("DISPFLOW_BLEND_FWD").as_deref() {
-            Ok("shared") => return BlendFwdVariant::Shared,
-            Ok("tile-regs") => return BlendFwdVariant::TileRegs,
-            _ => {}
-        }
-        if info.kind == "CPU" {
-            BlendFwdVariant::TileRegs
-        } else {
-            BlendFwdVariant::Shared
-        }
-    }
+/// The default for a device: pixels in registers on CPU devices (lavapipe, `bench --suite
+/// raster`); the shared-memory kernel on GPUs, where an 8-invocation workgroup per tile
+/// leaves most of a warp idle (measured on an H200 with the backward: docs/gpu_h200.md).
+/// `DISPFLOW_BLEND_FWD=shared|tile-regs` overrides the choice (benches, tests).
+impl DeviceShape for BlendFwdVariant {
+    const ENV: &'static str = "DISPFLOW_BLEND_FWD";
+    const ALL: &'static [Self] = &BlendFwdVariant::ALL;
+    const CPU: Self = BlendFwdVariant::TileRegs;
+    const GPU: Self = BlendFwdVariant::Shared;
 
-    pub fn name(self) -> &'static str {
+    fn name(self) -> &'static str {
         match self {
             BlendFwdVariant::Shared => "shared",
             BlendFwdVariant::TileRegs => "tile-regs",

@@ -8,6 +8,9 @@ use dispflow_vk::kernels::raster::{
 use dispflow_vk::testing::{self, Noise, TestGpu};
 use dispflow_vk::vk::{Buffer, Recorder};
 
+/// The variants' `name()` and `for_device()`.
+pub use dispflow_vk::kernels::shape::DeviceShape;
+
 #[derive(Clone, Debug, Default)]
 pub struct Scene {
     pub means: Vec<[f32; 3]>,

@@ -1,0 +1,104 @@
+//! Kernel families that come in a GPU shape and a CPU shape (lavapipe runs each SIMD lane's
+//! barriers, shared arrays and atomics as loops, so a kernel shaped for a warp can cost it 5–25×
+//! one shaped for a core). Every family picks its shape the same way: an environment variable
+//! when set (benches, tests, `dispflow-vk devices`), else the device's kind.
+
+use crate::vk::DeviceInfo;
+
+/// One family's shapes. Both shapes compute the same outputs (up to float summation order),
+/// and the family's tests run both against its CPU twin.
+pub trait DeviceShape: Copy + Sized + 'static {
+    /// The variable that overrides the choice, e.g. `DISPFLOW_LOSS_BLUR`.
+    const ENV: &'static str;
+    /// Every shape, in the order `name` lists them in messages.
+    const ALL: &'static [Self];
+    /// The shape CPU devices run.
+    const CPU: Self;
+    /// The shape every other device runs.
+    const GPU: Self;
+    /// The shape's name as `ENV` spells it.
+    fn name(self) -> &'static str;
+
+    /// The shape `info`'s device runs ([`for_device`]).
+    fn for_device(info: &DeviceInfo) -> Self {
+        for_device(info)
+    }
+}
+
+/// `S`'s shape for `info`: `S::ENV`'s value when it names one, else by the device's kind.
+/// An unknown value is reported on stderr (a typo must not pass as a measurement of the
+/// shape it meant) and the device's choice stands.
+pub fn for_device<S: DeviceShape>(info: &DeviceInfo) -> S {
+    let var = std::env::var(S::ENV).ok();
+    choose(var.as_deref(), info.kind == "CPU").unwrap_or_else(|(by_kind, msg)| {
+        eprintln!("warning: {msg}");
+        by_kind
+    })
+}
+
+/// The shape `var` names, else the device kind's; `Err` carries that fallback and why.
+fn choose<S: DeviceShape>(var: Option<&str>, cpu: bool) -> Result<S, (S, String)> {
+    let by_kind = if cpu { S::CPU } else { S::GPU };
+    let Some(v) = var else {
+        return Ok(by_kind);
+    };
+    match S::ALL.iter().find(|s| s.name() == v) {
+        Some(s) => Ok(*s),
+        None => {
+            let names: Vec<&str> = S::ALL.iter().map(|s| s.name()).collect();
+            let msg = format!(
+                "{}={v} is not one of {}; using the device's choice, {}",
+                S::ENV,
+                names.join(", "),
+                by_kind.name()
+            );
+            Err((by_kind, msg))
+        }
+    }
+}
+
+/// What `info`'s device runs in every shaped family: (family, shape, the variable that
+/// overrides it), for `dispflow-vk devices`.
+pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'static str)> {
+    fn row<S: DeviceShape>(
+        what: &'static str,
+        info: &DeviceInfo,
+    ) -> (&'static str, &'static str, &'static str) {
+        (what, S::for_device(info).name(), S::ENV)
+    }
+    use super::{loss::BlurShape, mlp_rows::MlpKernels, nodes::GatherShape, radix_sort, raster};
+    vec![
+        row::<MlpKernels>("MLP", info),
+        row::<raster::BlendFwdVariant>("blend forward", info),
+        row::<raster::BlendBwdVariant>("blend backward", info),
+        row::<GatherShape>("node gather", info),
+        row::<BlurShape>("loss blur", info),
+        row::<radix_sort::SortShape>("radix sort", info),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernels::radix_sort::SortShape;
+
+    #[test]
+    fn a_named_shape_wins_the_kind_decides_otherwise_and_a_typo_is_reported() {
+        assert_eq!(choose::<SortShape>(None, true), Ok(SortShape::Serial));
+        assert_eq!(choose::<SortShape>(None, false), Ok(SortShape::Block));
+        assert_eq!(
+            choose::<SortShape>(Some("block"), true),
+            Ok(SortShape::Block)
+        );
+        assert_eq!(
+            choose::<SortShape>(Some("serial"), false),
+            Ok(SortShape::Serial)
+        );
+        let (fallback, msg) = choose::<SortShape>(Some("serail"), true).unwrap_err();
+        assert_eq!(fallback, SortShape::Serial);
+        assert!(
+            msg.contains("DISPFLOW_SORT=serail") && msg.contains("block, serial"),
+            "{msg}"
+        );
+    }
+}
