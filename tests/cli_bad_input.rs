@@ -42,9 +42,8 @@ fn bin(root: &Path) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_dispflow-vk"));
     // What a user sees (no backtrace of the error); never the user's own cache or home.
     c.env_remove("RUST_BACKTRACE")
-        .env_remove("RUST_LIB_BACKTRACE")
-        .env("HOME", root.join("home"))
-        .env("XDG_CACHE_HOME", root.join("cache"));
+        .env_remove("RUST_LIB_BACKTRACE");
+    dispflow_vk::testing::isolated_home(&mut c, root);
     c
 }
 

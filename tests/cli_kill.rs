@@ -47,10 +47,8 @@ struct Setup {
 impl Setup {
     fn cmd(&self) -> Command {
         let mut c = Command::new(env!("CARGO_BIN_EXE_dispflow-vk"));
-        c.env_remove("RUST_BACKTRACE")
-            .env("LP_NUM_THREADS", "1")
-            .env("HOME", self.root.join("home"))
-            .env("XDG_CACHE_HOME", self.root.join("cache"));
+        c.env_remove("RUST_BACKTRACE").env("LP_NUM_THREADS", "1");
+        dispflow_vk::testing::isolated_home(&mut c, &self.root);
         c
     }
 

@@ -275,10 +275,9 @@ fn train_cli(tmp: &std::path::Path, name: &str, cfg: &TrainConfig) -> (bool, Str
     let toml = tmp.join(format!("{name}.toml"));
     std::fs::write(&toml, cfg.to_toml()).unwrap();
     let out = tmp.join(name);
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dispflow-vk"))
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_dispflow-vk"));
+    let o = dispflow_vk::testing::isolated_home(&mut cmd, tmp)
         .env("LP_NUM_THREADS", "1")
-        .env("HOME", tmp.join("home"))
-        .env("XDG_CACHE_HOME", tmp.join("cache"))
         .args(["train", "--preset", "fast", "--config"])
         .arg(&toml)
         .arg("--data")

@@ -22,9 +22,8 @@ const ITERATIONS: &str = "600";
 fn dynamic_psnr(tmp: &Path, scene: &Path, recipe: Option<&str>, seed: u32) -> f64 {
     let out = tmp.join(format!("{}-{seed}", recipe.unwrap_or("preset")));
     let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_dispflow-vk"));
-    cmd.env("LP_NUM_THREADS", "1")
-        .env("HOME", tmp.join("home"))
-        .env("XDG_CACHE_HOME", tmp.join("cache"))
+    dispflow_vk::testing::isolated_home(&mut cmd, tmp)
+        .env("LP_NUM_THREADS", "1")
         .args(["train", "--preset", "fast", "--iterations", ITERATIONS])
         .args(["--seed", &seed.to_string(), "--data"])
         .arg(scene)

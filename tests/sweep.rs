@@ -76,9 +76,8 @@ impl Setup {
         let mut c = Command::new(env!("CARGO_BIN_EXE_dispflow-vk"));
         c.current_dir(&self.root)
             .env_remove("RUST_BACKTRACE")
-            .env("LP_NUM_THREADS", "1")
-            .env("HOME", self.root.join("home"))
-            .env("XDG_CACHE_HOME", self.root.join("cache"));
+            .env("LP_NUM_THREADS", "1");
+        dispflow_vk::testing::isolated_home(&mut c, &self.root);
         c
     }
 
