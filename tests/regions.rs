@@ -74,16 +74,27 @@ fn region_psnr_matches_a_direct_computation() {
         (r.static_.unwrap() - fixed).abs() < 1e-4,
         "{r:?} vs {fixed}"
     );
+    // Columns 0 and 1 of 6: a third of the image.
+    assert!(
+        (r.dynamic_share.unwrap() - 1.0 / 3.0).abs() < 1e-12,
+        "{r:?}"
+    );
     // Undilated: column 1's red error moves to the static side.
     let r0 = region_psnr(&render, &gt, &mask, w, h, 0);
+    assert!(
+        (r0.dynamic_share.unwrap() - 1.0 / 6.0).abs() < 1e-12,
+        "{r0:?}"
+    );
     let mixed = (4.0 * 0.04 + 16.0 * 0.0025) / (20.0 * 3.0);
     assert!((r0.static_.unwrap() - psnr(mixed)).abs() < 1e-4, "{r0:?}");
     // Empty and full masks: one side absent, never NaN.
     let empty = region_psnr(&render, &gt, &vec![0; n], w, h, 3);
     assert_eq!(empty.dynamic, None);
+    assert_eq!(empty.dynamic_share, Some(0.0));
     assert!(empty.static_.unwrap().is_finite());
     let full = region_psnr(&render, &gt, &vec![1; n], w, h, 3);
     assert_eq!(full.static_, None);
+    assert_eq!(full.dynamic_share, Some(1.0));
     // A perfect region reads +∞ (left out of means like a perfect frame's PSNR).
     let perfect = region_psnr(&gt, &gt, &mask, w, h, 1);
     assert_eq!(perfect.dynamic, Some(f64::INFINITY));
@@ -115,8 +126,11 @@ fn evaluation_reports_regions_where_masks_exist_and_nothing_where_they_are_empty
                     (want.dynamic, want.static_)
                 );
                 assert!(e.dynamic_psnr.unwrap().is_finite());
+                let share = e.dynamic_share.unwrap();
+                assert!(share > 0.0 && share < 1.0 && share == want.dynamic_share.unwrap());
             } else {
                 assert_eq!((e.dynamic_psnr, e.static_psnr), (None, None), "{}", e.id);
+                assert_eq!(e.dynamic_share, None, "{}", e.id);
             }
         }
         let ctx = dispflow_vk::train::metrics::ReportContext {

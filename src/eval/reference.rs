@@ -92,6 +92,9 @@ pub struct RenderScore {
     pub dynamic_psnr: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub static_psnr: Option<f64>,
+    /// Share of the frame's pixels inside the dilated motion mask.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dynamic_share: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lpips: Option<f64>,
 }
@@ -225,6 +228,7 @@ pub fn score_folder(gpu: &Gpu, a: &ScoreArgs, ds: &Dataset) -> Result<Vec<Render
             ssim: v.ssim,
             dynamic_psnr: regions.and_then(|r| r.dynamic).map(|p| p.min(PSNR_CAP)),
             static_psnr: regions.and_then(|r| r.static_).map(|p| p.min(PSNR_CAP)),
+            dynamic_share: regions.and_then(|r| r.dynamic_share),
             lpips,
         });
     }

@@ -55,6 +55,9 @@ pub struct FrameEval {
     /// PSNR outside that dilated mask (`None` likewise).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub static_psnr: Option<f64>,
+    /// Share of the frame's pixels inside that dilated mask (`None` likewise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dynamic_share: Option<f64>,
     /// AP of the normalised displacement flow against the mask (`None`: no mask, an empty
     /// mask, or no earlier time in the dataset).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -605,6 +608,7 @@ impl Evaluator {
             has_mask,
             dynamic_psnr: regions.dynamic,
             static_psnr: regions.static_,
+            dynamic_share: regions.dynamic.and(regions.dynamic_share),
             ap,
             drc,
             flow_ap,

@@ -14,6 +14,10 @@ pub const MASK_DILATE_PX: u32 = 3;
 pub struct RegionPsnr {
     pub dynamic: Option<f64>,
     pub static_: Option<f64>,
+    /// Share of the image's pixels inside the dilated mask (`None` for an empty image): a
+    /// frame's dynamic PSNR is a mean over this many pixels, so frames are compared knowing
+    /// how much of each one moves.
+    pub dynamic_share: Option<f64>,
 }
 
 /// `mask` (`w·h`, nonzero = moving) dilated by a disc of radius `r` pixels: a pixel is set when
@@ -67,8 +71,10 @@ pub fn region_psnr(
     }
     let psnr =
         |(se, n): (f64, u64)| (n > 0).then(|| crate::kernels::loss::psnr(se / (3 * n) as f64));
+    let total = acc[0].1 + acc[1].1;
     RegionPsnr {
         dynamic: psnr(acc[1]),
         static_: psnr(acc[0]),
+        dynamic_share: (total > 0).then(|| acc[1].1 as f64 / total as f64),
     }
 }
