@@ -191,10 +191,17 @@ macro_rules! subgroup_reruns {
     };
 }
 
+/// Whether this process is one of [`rerun_at_subgroup_sizes`]'s re-runs. A test whose size
+/// exercises host-side chunking or serial depth, not lane counts, may shrink there: what the
+/// re-runs check (no kernel assumes 8 lanes) shows within a few workgroups.
+pub fn subgroup_rerun() -> bool {
+    std::env::var_os("DISPFLOW_SUBGROUP_RERUN").is_some()
+}
+
 /// Re-runs the calling test binary (all its tests but `this_test`) with lavapipe vectors of
 /// 1024 and 128 bits and checks that the device reported 32- and 4-lane subgroups.
 pub fn rerun_at_subgroup_sizes(this_test: &str) {
-    if std::env::var_os("DISPFLOW_SUBGROUP_RERUN").is_some() {
+    if subgroup_rerun() {
         return;
     }
     let lavapipe = gpu().info.name.contains("llvmpipe");

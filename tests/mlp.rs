@@ -189,7 +189,7 @@ fn assert_close(what: &str, got: &[f32], want: &[f64], rel: f64, abs: f64) -> f6
 /// lavapipe vector widths take the register path only: neither path uses subgroup operations,
 /// and the register path is what lavapipe runs (this keeps the binary's CI time in bounds).
 fn kernels() -> Vec<MlpKernels> {
-    if std::env::var_os("DISPFLOW_SUBGROUP_RERUN").is_some() {
+    if testing::subgroup_rerun() {
         vec![MlpKernels::Rows]
     } else {
         vec![MlpKernels::Tiled, MlpKernels::Rows]
@@ -313,7 +313,7 @@ fn check_every_path(gpu: &Gpu, c: &Case, backward: bool) -> (f64, f64) {
 /// in the subgroup-size re-runs: what they check (no kernel assumes 8 lanes) shows within a
 /// few workgroups, and what a larger batch adds is host-side grids and chunks, checked here.
 fn rows_on(kern: MlpKernels, n: usize, tiled_max: usize) -> usize {
-    let rerun = std::env::var_os("DISPFLOW_SUBGROUP_RERUN").is_some();
+    let rerun = testing::subgroup_rerun();
     match kern {
         MlpKernels::Rows if !rerun => n,
         _ => n.min(tiled_max),
@@ -872,7 +872,7 @@ fn more_rows_than_the_device_binding_range_match_twin() {
         );
         return;
     }
-    if std::env::var_os("DISPFLOW_SUBGROUP_RERUN").is_some() {
+    if testing::subgroup_rerun() {
         return; // chunking is host logic; the 64-row chunk test covers other widths
     }
     let c = Case::new(cfg, n, 61, 1.5, true);
