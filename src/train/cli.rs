@@ -29,7 +29,9 @@ pub struct TrainArgs {
     pub config: Option<PathBuf>,
     /// Training iterations, at least 1 [preset: paper 20000, fast 600]. With the fast preset
     /// the schedule (warm-up, motion start, SH growth, densification window, opacity resets,
-    /// checkpoint and test intervals) scales with it in proportion; the paper preset keeps
+    /// checkpoint and test intervals) scales with it in proportion, the test interval no
+    /// shorter than the log interval (a short run probes at its log lines and its end, not
+    /// every few iterations); the paper preset keeps
     /// every schedule point where it is, as the official code's --iterations (config field
     /// `schedule`).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]

@@ -762,7 +762,7 @@ impl TrainConfig {
     /// The same run in proportion over `n` iterations: every schedule point counted in
     /// iterations (warm-up, motion start, SH growth, densification window, opacity resets,
     /// checkpoint and test-PSNR intervals) scales by `n / iterations`, so `--iterations` alone
-    /// gives a coherent run. Kept as they are: the densification interval (3DGS accumulates its
+    /// gives a coherent run; the test-PSNR interval does not fall below the log interval. Kept as they are: the densification interval (3DGS accumulates its
     /// gradient statistics over 100 steps whatever the length) and the log interval. The
     /// learning-rate decays and the sparsity schedule already span the run. With
     /// `schedule = absolute` (the paper preset, as the official `--iterations`) only the
@@ -784,10 +784,12 @@ impl TrainConfig {
         c.motion_start = scale(self.motion_start);
         c.sh_interval = scale1(self.sh_interval);
         c.checkpoint_interval = scale1(self.checkpoint_interval);
+        // A probe renders every probe frame: no more often than the log lines (unless the
+        // preset probes more often), or a 30-iteration run spends a third of its time probing.
         c.test_interval = if self.test_interval == 0 {
             0
         } else {
-            scale1(self.test_interval)
+            scale1(self.test_interval).max(self.test_interval.min(self.log_interval))
         };
         let d = &mut c.densify;
         d.from = scale(self.densify.from);
@@ -1116,7 +1118,6 @@ mod tests {
             c.densify.until,
             c.densify.opacity_reset_interval,
             c.checkpoint_interval,
-            c.test_interval,
         ]
         .iter()
         .map(|&v| v as f64 / n)
@@ -1144,6 +1145,11 @@ mod tests {
                 }
                 assert_eq!(c.densify.interval, base.densify.interval);
                 assert_eq!(c.log_interval, base.log_interval);
+                // Test probes scale too, but never more often than the log lines.
+                let probes =
+                    (base.test_interval as f64 * n as f64 / base.iterations as f64).round() as u32;
+                let floor = base.test_interval.min(base.log_interval);
+                assert_eq!(c.test_interval, probes.max(floor), "at {n}");
                 assert_eq!(c.lr, base.lr);
             }
         }
@@ -1155,6 +1161,10 @@ mod tests {
         let c = proportional_paper.with_iterations(3);
         c.validate().unwrap();
         assert!(c.densify.until <= 3 && c.sh_interval >= 1 && c.checkpoint_interval >= 1);
+        // A short fast run probes at its log lines (and the end), not every 3 iterations.
+        let c = TrainConfig::fast().with_iterations(30);
+        assert_eq!((c.test_interval, c.log_interval), (50, 50));
+        assert_eq!(TrainConfig::fast().with_iterations(6000).test_interval, 500);
     }
 
     #[test]
