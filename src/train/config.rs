@@ -762,8 +762,9 @@ impl TrainConfig {
     /// The same run in proportion over `n` iterations: every schedule point counted in
     /// iterations (warm-up, motion start, SH growth, densification window, opacity resets,
     /// checkpoint and test-PSNR intervals) scales by `n / iterations`, so `--iterations` alone
-    /// gives a coherent run; the test-PSNR interval does not fall below the log interval. Kept as they are: the densification interval (3DGS accumulates its
-    /// gradient statistics over 100 steps whatever the length) and the log interval. The
+    /// gives a coherent run; the test-PSNR interval does not fall below the log interval.
+    /// Kept as they are: the densification interval (3DGS accumulates its gradient statistics
+    /// over 100 steps whatever the length) and the log interval. The
     /// learning-rate decays and the sparsity schedule already span the run. With
     /// `schedule = absolute` (the paper preset, as the official `--iterations`) only the
     /// iteration count changes.
