@@ -52,7 +52,7 @@ pub struct SweepArgs {
 #[derive(clap::Subcommand, Debug, Clone)]
 pub enum SweepCommand {
     /// Rebuild the tables, the Pareto plot and report.md of a sweep directory from its
-    /// results (cells/**/cell.json, else results.jsonl alone).
+    /// results (cells/**/cell.json, plus the results.jsonl lines of cells without one).
     Report(ReportArgs),
 }
 
@@ -60,8 +60,9 @@ pub enum SweepCommand {
 pub struct ReportArgs {
     /// The sweep directory.
     pub dir: PathBuf,
-    /// The plan, for its table choices and trade settings [default: those recorded in
-    /// DIR/sweep.json, else every table].
+    /// The plan, for its table choices, trade settings and cells (their order, and which
+    /// results.jsonl lines without a cell file are kept) [default: those recorded in
+    /// DIR/sweep.json, else every table and every line].
     #[arg(long)]
     pub plan: Option<PathBuf>,
 }

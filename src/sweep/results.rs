@@ -120,26 +120,39 @@ pub fn write_results(root: &Path, results: &[CellResult]) -> Result<()> {
     crate::train::checkpoint::write_atomic(&root.join(RESULTS), text.as_bytes())
 }
 
-/// The results of a sweep directory: the cells' own files when there are any (rewriting
-/// `results.jsonl` from them, ordered as `order` lists cell keys, unknown ones last), else
-/// `results.jsonl` alone.
+/// The results of a sweep directory: `results.jsonl` alone when no cell has its own file;
+/// else the cells' files plus the rows of `results.jsonl` for cells of `order` (all, when
+/// empty) that have no file (finished where their directories were not kept, such as a
+/// committed sweep that ships only its `results.jsonl`), ordered as `order` lists cell keys,
+/// unknown ones last, and `results.jsonl` is rewritten from them. A cell's file wins over its
+/// row: a re-run replaces it. (Without the rows, a `--cell` run into such a directory and
+/// the next report rewrote `results.jsonl` with that cell alone.)
 pub fn gather(root: &Path, order: &[String]) -> Result<Vec<CellResult>> {
     let files = cell_files(root);
-    if files.is_empty() {
-        let p = root.join(RESULTS);
-        if !p.is_file() {
-            return Err(Error::Invalid(format!(
-                "{}: no {RESULTS} and no cells/**/{CELL_JSON}: not a sweep directory, or no \
-                 cell has finished",
-                root.display()
-            )));
-        }
-        return read_results(&p);
+    let p = root.join(RESULTS);
+    if files.is_empty() && !p.is_file() {
+        return Err(Error::Invalid(format!(
+            "{}: no {RESULTS} and no cells/**/{CELL_JSON}: not a sweep directory, or no cell \
+             has finished",
+            root.display()
+        )));
     }
     let mut results = files
         .iter()
         .map(|f| read_cell(f))
         .collect::<Result<Vec<_>>>()?;
+    if files.is_empty() {
+        return read_results(&p);
+    }
+    if p.is_file() {
+        // A row of a cell the plan no longer has (its directory deleted with it) is dropped.
+        let fresh: std::collections::HashSet<String> =
+            results.iter().map(|r| r.cell.clone()).collect();
+        let keep = |r: &CellResult| {
+            !fresh.contains(&r.cell) && (order.is_empty() || order.contains(&r.cell))
+        };
+        results.extend(read_results(&p)?.into_iter().filter(keep));
+    }
     let pos = |r: &CellResult| {
         order
             .iter()
@@ -149,4 +162,87 @@ pub fn gather(root: &Path, order: &[String]) -> Result<Vec<CellResult>> {
     results.sort_by_key(|r| pos(r));
     write_results(root, &results)?;
     Ok(results)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(cell: &str, psnr: f64) -> CellResult {
+        let (scene, rest) = cell.split_once('/').unwrap();
+        let variant = rest.split('/').next().unwrap();
+        CellResult {
+            cell: cell.into(),
+            scene: scene.into(),
+            variant: variant.into(),
+            seed: 0,
+            args: vec![],
+            config_toml: String::new(),
+            config: serde_json::Value::Null,
+            method: "DispFlow-GS".into(),
+            device: "test".into(),
+            iterations: 1,
+            num_gaussians: 1,
+            psnr,
+            ssim: 0.5,
+            lpips: None,
+            dynamic_psnr: None,
+            static_psnr: None,
+            mmap: None,
+            drc: None,
+            ms_per_step: None,
+            train_seconds: None,
+            cell_seconds: 1.0,
+            jobs: 1,
+            run: format!("cells/{cell}/run"),
+            strip: None,
+            status: None,
+            status_note: None,
+        }
+    }
+
+    fn write_cell(root: &Path, r: &CellResult) {
+        let d = root.join("cells").join(&r.cell);
+        std::fs::create_dir_all(&d).unwrap();
+        std::fs::write(d.join(CELL_JSON), serde_json::to_string(r).unwrap()).unwrap();
+    }
+
+    #[test]
+    fn gather_keeps_the_rows_of_cells_without_files_and_a_file_wins() {
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path();
+        let keys = ["a/x/seed0", "a/y/seed0", "b/x/seed0", "gone/x/seed0"];
+        // A committed sweep: results.jsonl only.
+        let old: Vec<CellResult> = keys.iter().map(|k| row(k, 10.0)).collect();
+        write_results(root, &old).unwrap();
+        assert_eq!(gather(root, &[]).unwrap(), old);
+        // One cell re-run into it, one new cell; the plan no longer has "gone".
+        let (rerun, new) = (row("a/y/seed0", 20.0), row("c/x/seed0", 30.0));
+        write_cell(root, &rerun);
+        write_cell(root, &new);
+        let order: Vec<String> = ["c/x/seed0", "a/x/seed0", "a/y/seed0", "b/x/seed0"]
+            .map(String::from)
+            .to_vec();
+        let got = gather(root, &order).unwrap();
+        let want = vec![new.clone(), old[0].clone(), rerun.clone(), old[2].clone()];
+        assert_eq!(got, want);
+        // results.jsonl now holds the same, so a report from it alone agrees.
+        assert_eq!(read_results(&root.join(RESULTS)).unwrap(), want);
+        // No order (a report without plan or sweep.json): every row without a file stays,
+        // the unordered ones in file-then-row order.
+        write_results(root, &old).unwrap();
+        let got = gather(root, &[]).unwrap();
+        let cells: Vec<&str> = got.iter().map(|r| r.cell.as_str()).collect();
+        assert_eq!(
+            cells,
+            [
+                "a/y/seed0",
+                "c/x/seed0",
+                "a/x/seed0",
+                "b/x/seed0",
+                "gone/x/seed0"
+            ]
+        );
+        assert_eq!(got[0].psnr, 20.0);
+    }
 }
