@@ -7,6 +7,7 @@ use clap::Parser;
 use dispflow_vk::vk::Gpu;
 
 fn main() -> anyhow::Result<()> {
+    default_sigpipe();
     let cli = cli::Cli::parse();
     match cli.command {
         cli::Command::Train(args) => {
@@ -42,4 +43,15 @@ fn main() -> anyhow::Result<()> {
         cli::Command::Data(a) => dispflow_vk::data::cli::run(&a)?,
     }
     Ok(())
+}
+
+/// Rust starts with SIGPIPE ignored, so a print into a closed pipe
+/// (`dispflow-vk sweep PLAN --dry-run | head -3`) fails and `println!` panics with a backtrace.
+/// The default action ends the process quietly instead, as other Unix tools do.
+fn default_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called first in `main`, before any thread exists; SIG_DFL is a valid action.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
 }

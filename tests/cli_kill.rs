@@ -6,6 +6,8 @@
 //! must hold every iteration exactly once with the uninterrupted run's values, and no temp
 //! file may be left behind.
 //!
+//! And a closed stdout pipe ends a command quietly, not with a panic.
+//!
 //! Both runs use LP_NUM_THREADS=1: lavapipe's float atomics then add in a fixed order, so the
 //! run is reproducible bit for bit (see tests/train_resume.rs).
 
@@ -316,5 +318,36 @@ fn sigkilled_runs_resume_to_the_uninterrupted_result() {
         temp_files(&straight),
         Vec::<PathBuf>::new(),
         "temp files left"
+    );
+}
+
+/// A closed pipe ends a command quietly (SIGPIPE's default action), as `dispflow-vk sweep PLAN
+/// --dry-run | head -1` should: the reading end is closed before the command writes its first
+/// line, which `println!` would otherwise turn into a panic and a backtrace.
+#[test]
+fn a_closed_stdout_pipe_ends_a_command_without_a_panic() {
+    use std::os::fd::{FromRawFd, OwnedFd};
+    use std::os::unix::process::ExitStatusExt;
+    let mut fds = [0i32; 2];
+    // SAFETY: `fds` has room for the two descriptors `pipe` writes.
+    assert_eq!(unsafe { libc::pipe(fds.as_mut_ptr()) }, 0);
+    // SAFETY: both descriptors were just created and nothing else owns them.
+    let (read, write) = unsafe { (OwnedFd::from_raw_fd(fds[0]), OwnedFd::from_raw_fd(fds[1])) };
+    drop(read);
+    let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/tools/plans/trade.toml");
+    let out = Command::new(env!("CARGO_BIN_EXE_dispflow-vk"))
+        .args(["sweep", plan, "--dry-run"])
+        .env_remove("RUST_BACKTRACE")
+        .stdout(Stdio::from(write))
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(
+        out.status.signal(),
+        Some(libc::SIGPIPE),
+        "{:?}: {stderr}",
+        out.status
     );
 }
