@@ -137,13 +137,13 @@ pub fn gather(root: &Path, order: &[String]) -> Result<Vec<CellResult>> {
             root.display()
         )));
     }
+    if files.is_empty() {
+        return read_results(&p);
+    }
     let mut results = files
         .iter()
         .map(|f| read_cell(f))
         .collect::<Result<Vec<_>>>()?;
-    if files.is_empty() {
-        return read_results(&p);
-    }
     if p.is_file() {
         // A row of a cell the plan no longer has (its directory deleted with it) is dropped.
         let fresh: std::collections::HashSet<String> =
