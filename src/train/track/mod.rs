@@ -8,22 +8,75 @@
 //! a point P at the frame's time and a velocity v are six unknowns; the pixel's ray (two
 //! constraints per frame) over the frame and its neighbours pins them. Hypothesise from the
 //! nearest neighbour (a depth along the pixel's ray, a wrong pixel of the neighbour with the
-//! same ground-truth colour and a depth along its ray give P and v), verify on the others:
-//! P + v·(t_j − t) must land on a wrong pixel of frame j whose ground truth has the pixel's
-//! colour. A ghost (the model draws the object where it is not) is wrong too, but its ground
-//! truth is the background: the colour test tells it from the missing object.
+//! same ground-truth patch about it and a depth along its ray give P and v), verify on the
+//! others: P + v·(t_j − t) must land on a wrong pixel of frame j whose ground-truth patch is
+//! the pixel's. A ghost (the model draws the object where it is not) is wrong too, but its
+//! ground truth is the background: the patch test tells it from the missing object. The rays
+//! leave a moving point's depth free when the camera's path is nearly straight; the slowest
+//! track is taken then ([`SPEED_COST`], [`solve::solve_slowest`]).
 
 use crate::data::Bounds;
 use crate::kernels::raster::Camera;
 use crate::train::transients::{pixel_errors, pixel_ray, ray_box, threshold};
 
+mod solve;
+
 /// Depths sampled along each ray (the hypothesis grid; the optimiser refines the rest).
 pub const TRACK_DEPTHS: usize = 32;
-/// Mean absolute RGB difference under which two ground-truth pixels are the same surface.
+/// Mean absolute RGB difference under which two ground-truth patches are the same surface.
 pub const COLOUR_TOL: f32 = 0.15;
+/// The compared patch's radius (pixels each side). A pixel's colour alone is no correspondence
+/// on a textured scene (a checkered wall has the sphere's colours everywhere): on the built-in
+/// scene single pixels put the tracks' velocities off by 7× the true speed, 5×5 patches by 1×
+/// (docs/measurements.md, last section).
+pub const PATCH_RADIUS: i64 = 2;
+const PATCH_LEN: usize = ((2 * PATCH_RADIUS + 1) * (2 * PATCH_RADIUS + 1)) as usize;
+/// The rays of a camera that moves along a nearly straight path leave a one-parameter family of
+/// tracks — every (P, v) scaled about the camera's path — that project onto the same pixels, so
+/// the rays do not pin a moving point's depth (monocular ambiguity). The grid then prefers the
+/// slowest hypothesis (`SPEED_COST` × speed / `v_max` added to its patch cost) and the
+/// refinement the slowest solution in the directions the rays leave free
+/// ([`solve::solve_slowest`]). A still surface is then tracked still, and a moving one at a
+/// depth that projects right in the neighbours, not necessarily its own.
+pub const SPEED_COST: f32 = 0.3;
+
+/// A ground-truth patch about a pixel (edge pixels repeated), RGB.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Patch([[f32; 3]; PATCH_LEN]);
+
+impl Patch {
+    pub fn of(gt: &[[f32; 4]], w: u32, h: u32, x: u32, y: u32) -> Self {
+        let mut p = [[0.0; 3]; PATCH_LEN];
+        let side = 2 * PATCH_RADIUS + 1;
+        for (k, px) in p.iter_mut().enumerate() {
+            let (dx, dy) = (
+                k as i64 % side - PATCH_RADIUS,
+                k as i64 / side - PATCH_RADIUS,
+            );
+            let xx = (x as i64 + dx).clamp(0, w as i64 - 1);
+            let yy = (y as i64 + dy).clamp(0, h as i64 - 1);
+            let g = gt[(yy * w as i64 + xx) as usize];
+            *px = [g[0], g[1], g[2]];
+        }
+        Patch(p)
+    }
+
+    /// The larger of the centre pixels' and the whole patches' mean absolute RGB difference:
+    /// the patch tells texture apart, the centre keeps a small object's colour (a ball of a few
+    /// pixels is mostly background in its patch).
+    pub fn distance(&self, o: &Patch) -> f32 {
+        let l1 = |a: &[f32; 3], b: &[f32; 3]| {
+            (a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs()
+        };
+        let all: f32 = self.0.iter().zip(&o.0).map(|(a, b)| l1(a, b)).sum();
+        let c = PATCH_LEN / 2;
+        (l1(&self.0[c], &o.0[c]) / 3.0).max(all / (3 * PATCH_LEN) as f32)
+    }
+}
+
 /// Neighbour pixels a wrong pixel may lie from the projection (the depth grid's slack).
 const SLACK: i64 = 1;
-/// The most anchor pixels one track tries (evenly strided over those of its colour): a
+/// The most anchor pixels one track tries (evenly strided over those of its patch): a
 /// hypothesis costs `TRACK_DEPTHS²` × neighbours projections, and a large wrong region (a
 /// ghost, a big object at 800 px) would make a spawn cost seconds; the least-squares
 /// refinement takes the track from the nearest hypothesis to the rays it explains.
@@ -65,10 +118,15 @@ impl<'a> Residual<'a> {
             .collect()
     }
 
-    /// The closest-coloured hot pixel within [`SLACK`] of where `p` projects and its colour
-    /// distance from `c`; `None` when it projects behind the camera, outside, or onto no hot
-    /// pixel of that colour.
-    fn explains(&self, p: [f32; 3], c: [f32; 3]) -> Option<(f32, u32, u32)> {
+    /// The ground-truth patch about pixel (x, y).
+    fn patch(&self, x: u32, y: u32) -> Patch {
+        Patch::of(self.gt, self.camera.width, self.camera.height, x, y)
+    }
+
+    /// The hot pixel within [`SLACK`] of where `p` projects whose patch is closest to `c`, and
+    /// its distance from `c`; `None` when it projects behind the camera, outside, or onto no
+    /// hot pixel with a patch within [`COLOUR_TOL`].
+    fn explains(&self, p: [f32; 3], c: &Patch) -> Option<(f32, u32, u32)> {
         let cam = self.camera;
         let q: [f32; 3] = std::array::from_fn(|r| {
             (0..3).map(|a| cam.rot[r][a] * p[a]).sum::<f32>() + cam.trans[r]
@@ -86,7 +144,7 @@ impl<'a> Residual<'a> {
                 if !self.hot[i] {
                     continue;
                 }
-                let d = colour_distance(self.gt[i], c);
+                let d = self.patch(x as u32, y as u32).distance(c);
                 if d < COLOUR_TOL && best.map_or(true, |b| d < b.0) {
                     best = Some((d, x as u32, y as u32));
                 }
@@ -94,10 +152,6 @@ impl<'a> Residual<'a> {
         }
         best
     }
-}
-
-fn colour_distance(g: [f32; 4], c: [f32; 3]) -> f32 {
-    ((g[0] - c[0]).abs() + (g[1] - c[1]).abs() + (g[2] - c[2]).abs()) / 3.0
 }
 
 /// Points along a pixel's ray inside the scene's bounds, [`TRACK_DEPTHS`] of them, with their
@@ -115,9 +169,9 @@ fn ray_points(cam: &Camera, x: u32, y: u32, bounds: &Bounds) -> Vec<([f32; 3], f
         .collect()
 }
 
-/// A hot pixel of the anchor: the pixel, its ground-truth colour and its ray's points.
-type Anchor = ((u32, u32), [f32; 4], Vec<([f32; 3], f32)>);
-/// A hypothesis: an anchor pixel's colour distance from the tracked pixel's, the pixel, and
+/// A hot pixel of the anchor: the pixel, its ground-truth patch and its ray's points.
+type Anchor = ((u32, u32), Patch, Vec<([f32; 3], f32)>);
+/// A hypothesis: an anchor pixel's patch distance from the tracked pixel's, the pixel, and
 /// its ray's points.
 type Hypothesis<'t> = (f32, (u32, u32), &'t [([f32; 3], f32)]);
 
@@ -157,16 +211,9 @@ impl<'a> Tracker<'a> {
         neighbours.retain(|n| (n.time - t).abs() > 1e-9);
         neighbours.sort_by(|a, b| (a.time - t).abs().total_cmp(&(b.time - t).abs()));
         let anchor = neighbours.first().map_or(Vec::new(), |a| {
-            let w = a.camera.width;
             a.hot_pixels()
                 .into_iter()
-                .map(|(u, v)| {
-                    (
-                        (u, v),
-                        a.gt[(v * w + u) as usize],
-                        ray_points(a.camera, u, v, bounds),
-                    )
-                })
+                .map(|(u, v)| ((u, v), a.patch(u, v), ray_points(a.camera, u, v, bounds)))
                 .collect()
         });
         Tracker {
@@ -186,20 +233,19 @@ impl<'a> Tracker<'a> {
 
     /// The track of pixel (x, y) of the frame, if one explains the anchor and
     /// [`Tracker::required`] of the other neighbours (the most explained, then the closest
-    /// colours, win).
+    /// patches and the slowest, win).
     pub fn track(&self, x: u32, y: u32) -> Option<Track> {
         let anchor = self.neighbours.first()?;
         let dt = anchor.time - self.frame.time;
         let f = self.frame.camera;
-        let g = self.frame.gt[(y * f.width + x) as usize];
-        let c = [g[0], g[1], g[2]];
+        let c = &self.frame.patch(x, y);
         let here = ray_points(f, x, y, &self.bounds);
-        // The anchor's hot pixels of the same colour (at most MAX_HYPOTHESES, strided).
+        // The anchor's hot pixels with the same patch (at most MAX_HYPOTHESES, strided).
         let mut there: Vec<Hypothesis<'_>> = self
             .anchor
             .iter()
             .filter_map(|(at, gt, ray)| {
-                let d = colour_distance(*gt, c);
+                let d = gt.distance(c);
                 (d < COLOUR_TOL).then_some((d, *at, ray.as_slice()))
             })
             .collect();
@@ -233,6 +279,10 @@ impl<'a> Tracker<'a> {
                     if n < need {
                         continue;
                     }
+                    // The rays of a slowly turning camera leave a family of (P, v) scaled about
+                    // its path that project alike: prefer the slowest member.
+                    let speed = v.iter().map(|x| x * x).sum::<f32>().sqrt();
+                    let cost = cost + SPEED_COST * speed / self.v_max;
                     let better = best.map_or(true, |(b, bc, _)| {
                         n > b.explained || (n == b.explained && cost < bc)
                     });
@@ -256,7 +306,7 @@ impl<'a> Tracker<'a> {
     /// the rays of the pixels it explains (the frame's, the anchor's and each other
     /// neighbour's), so the depth grid's step does not become a velocity error of a step per
     /// frame spacing. The hypothesis stays when the system is degenerate.
-    fn refine(&self, t: Track, here: (u32, u32), at: (u32, u32), c: [f32; 3]) -> Track {
+    fn refine(&self, t: Track, here: (u32, u32), at: (u32, u32), c: &Patch) -> Track {
         let anchor = &self.neighbours[0];
         let mut rays = vec![
             (self.frame.camera, here, 0.0f32),
@@ -272,6 +322,8 @@ impl<'a> Tracker<'a> {
         // Σ_j A_jᵀA_j x = Σ_j A_jᵀ M_j o_j with A_j = M_j [I, s_j I], M_j = I − d̂d̂ᵀ.
         let mut n = [[0f64; 6]; 6];
         let mut b = [0f64; 6];
+        let mut ss = 0f64;
+        let rays_n = rays.len();
         for (cam, (x, y), s) in rays {
             let (o, d) = pixel_ray(cam, x, y);
             let len = d.iter().map(|v| (*v as f64).powi(2)).sum::<f64>().sqrt();
@@ -281,6 +333,7 @@ impl<'a> Tracker<'a> {
             });
             let mo: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| m[i][j] * o[j] as f64).sum());
             let s = s as f64;
+            ss += s * s;
             // M is a projector (MᵀM = M): AᵀA = [[M, sM], [sM, s²M]], Aᵀ M o = [Mo, s Mo].
             for i in 0..3 {
                 for j in 0..3 {
@@ -293,7 +346,10 @@ impl<'a> Tracker<'a> {
                 b[i + 3] += s * mo[i];
             }
         }
-        match solve6(n, b) {
+        // The rays leave the depth of a moving point free when the camera's path is nearly
+        // straight: there, the slowest track (`solve::solve_slowest`).
+        let s_rms = (ss / rays_n as f64).sqrt();
+        match solve::solve_slowest(n, b, s_rms) {
             Some(x) if x.iter().all(|v| v.is_finite()) => {
                 let mean = std::array::from_fn(|k| x[k] as f32);
                 let velocity: [f32; 3] = std::array::from_fn(|k| x[k + 3] as f32);
@@ -315,220 +371,5 @@ impl<'a> Tracker<'a> {
     }
 }
 
-/// Gaussian elimination with partial pivoting; `None` when (nearly) singular.
-fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
-    let scale = a.iter().flatten().fold(0f64, |m, v| m.max(v.abs()));
-    for c in 0..6 {
-        let p = (c..6).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if a[p][c].abs() <= 1e-9 * scale {
-            return None;
-        }
-        a.swap(c, p);
-        b.swap(c, p);
-        for r in c + 1..6 {
-            let f = a[r][c] / a[c][c];
-            let pivot = a[c];
-            for (x, p) in a[r][c..].iter_mut().zip(&pivot[c..]) {
-                *x -= f * p;
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    let mut x = [0f64; 6];
-    for c in (0..6).rev() {
-        let s: f64 = (c + 1..6).map(|k| a[c][k] * x[k]).sum();
-        x[c] = (b[c] - s) / a[c][c];
-    }
-    Some(x)
-}
-
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A camera at `centre` looking at the origin (world z up), 64×64.
-    fn look_at(centre: [f32; 3]) -> Camera {
-        let c = glam::Vec3::from(centre);
-        let fwd = (-c).normalize();
-        let right = fwd.cross(glam::Vec3::Z).normalize();
-        let down = fwd.cross(right);
-        let rot = [right.to_array(), down.to_array(), fwd.to_array()];
-        let trans = std::array::from_fn(|r| -glam::Vec3::from(rot[r]).dot(c));
-        Camera {
-            rot,
-            trans,
-            fx: 60.0,
-            fy: 60.0,
-            cx: 32.0,
-            cy: 32.0,
-            width: 64,
-            height: 64,
-            near: 0.01,
-        }
-    }
-
-    const ORANGE: [f32; 4] = [0.9, 0.5, 0.1, 1.0];
-
-    /// The scene's bounds: the cube of side 4 about the origin.
-    fn cube() -> Bounds {
-        Bounds {
-            min: glam::Vec3::splat(-2.0),
-            max: glam::Vec3::splat(2.0),
-        }
-    }
-
-    /// Five cameras around the origin, one per frame.
-    fn five_cameras() -> [Camera; 5] {
-        [
-            [6.0, 0.0, 3.0],
-            [0.0, 6.0, 3.0],
-            [-6.0, 0.5, 3.0],
-            [0.5, -6.0, 3.0],
-            [4.0, 4.0, 4.0],
-        ]
-        .map(look_at)
-    }
-
-    /// The pixel `p` projects into.
-    fn pixel_of(cam: &Camera, p: [f32; 3]) -> (u32, u32) {
-        let q: [f32; 3] = std::array::from_fn(|r| {
-            (0..3).map(|a| cam.rot[r][a] * p[a]).sum::<f32>() + cam.trans[r]
-        });
-        (
-            (cam.fx * q[0] / q[2] + cam.cx) as u32,
-            (cam.fy * q[1] / q[2] + cam.cy) as u32,
-        )
-    }
-
-    /// The ground truth of a ball of radius 0.15 at `p` on black, and a render without it.
-    fn frame(cam: &Camera, p: [f32; 3], colour: [f32; 4]) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
-        ball(cam, p, 0.15, colour)
-    }
-
-    /// The same, radius `r`.
-    fn ball(cam: &Camera, p: [f32; 3], r: f32, colour: [f32; 4]) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
-        let n = (cam.width * cam.height) as usize;
-        let mut gt = vec![[0.0, 0.0, 0.0, 1.0]; n];
-        let q: [f32; 3] = std::array::from_fn(|r| {
-            (0..3).map(|a| cam.rot[r][a] * p[a]).sum::<f32>() + cam.trans[r]
-        });
-        let (u, v) = (cam.fx * q[0] / q[2] + cam.cx, cam.fy * q[1] / q[2] + cam.cy);
-        let rad = cam.fx * r / q[2];
-        for y in 0..cam.height {
-            for x in 0..cam.width {
-                let (dx, dy) = (x as f32 + 0.5 - u, y as f32 + 0.5 - v);
-                if dx * dx + dy * dy <= rad * rad {
-                    gt[(y * cam.width + x) as usize] = colour;
-                }
-            }
-        }
-        (gt, vec![[0.0, 0.0, 0.0, 1.0]; n])
-    }
-
-    #[test]
-    fn a_ball_missing_from_every_frame_is_tracked_with_its_velocity() {
-        let bounds = cube();
-        // Five frames, each from another camera, the ball moving 0.37 per frame (more than
-        // its diameter) along a slanted line.
-        let cams = five_cameras();
-        let (p0, vel) = ([-0.3f32, 0.2, 0.1], [3.0f32, -1.5, 1.0]);
-        let speed = 3.5f32;
-        let times: Vec<f32> = (0..5).map(|i| i as f32 * 0.1).collect();
-        let pos = |t: f32| -> [f32; 3] { std::array::from_fn(|k| p0[k] + vel[k] * (t - 0.2)) };
-        let dist =
-            |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>().sqrt();
-        let (x, y) = pixel_of(&cams[2], p0);
-        let run = |places: &dyn Fn(usize) -> [f32; 3], v_max: f32| {
-            let imgs: Vec<_> = (0..5).map(|i| frame(&cams[i], places(i), ORANGE)).collect();
-            let res = |i: usize| Residual::new(&cams[i], times[i], &imgs[i].1, &imgs[i].0, 0.1);
-            let tr = Tracker::new(res(2), vec![res(4), res(1), res(3), res(0)], v_max, &bounds);
-            assert_eq!(tr.neighbours.len(), 4);
-            assert!(
-                (tr.neighbours[0].time - 0.1).abs() < 1e-6
-                    || (tr.neighbours[0].time - 0.3).abs() < 1e-6,
-                "nearest first"
-            );
-            assert_eq!(tr.required(), 2, "3 others: one may miss");
-            tr.track(x, y)
-        };
-        let t = run(&|i| pos(times[i]), 100.0).expect("tracked");
-        assert!(t.explained >= 2, "{t:?}");
-        assert!(dist(t.mean, p0) < 0.15, "mean {:?} vs {p0:?}", t.mean);
-        assert!(
-            dist(t.velocity, vel) < 0.15 * speed,
-            "velocity {:?} vs {vel:?}",
-            t.velocity
-        );
-        // A ball at places no constant velocity explains is not tracked.
-        let jumps = [
-            [1.5, 1.5, 0.0],
-            [-1.5, 1.2, 1.0],
-            p0,
-            [1.4, -1.5, -1.0],
-            [-1.2, -1.2, 1.5],
-        ];
-        assert_eq!(run(&|i| jumps[i], 100.0), None);
-        // Nor is one faster than v_max.
-        assert_eq!(run(&|i| pos(times[i]), 0.5 * speed), None);
-    }
-
-    #[test]
-    fn a_track_keeps_its_colour() {
-        // The same motion, but the neighbours' wrong pixels are another colour (a blue ball
-        // where the frame's is orange): not one object, no track.
-        let bounds = cube();
-        let cams = [[6.0, 0.0, 3.0], [0.0, 6.0, 3.0], [-6.0, 0.5, 3.0]].map(look_at);
-        let p = [0.1f32, -0.2, 0.3];
-        let imgs: Vec<_> = (0..3)
-            .map(|i| {
-                let colour = if i == 1 { ORANGE } else { [0.1, 0.2, 0.9, 1.0] };
-                frame(&cams[i], p, colour)
-            })
-            .collect();
-        let res = |i: usize| Residual::new(&cams[i], i as f32, &imgs[i].1, &imgs[i].0, 0.1);
-        let (x, y) = pixel_of(&cams[1], p);
-        let tr = Tracker::new(res(1), vec![res(0), res(2)], 100.0, &bounds);
-        assert!(tr.track(x, y).is_none());
-        // Same colour everywhere: a still ball is tracked with no velocity.
-        let imgs: Vec<_> = (0..3).map(|i| frame(&cams[i], p, ORANGE)).collect();
-        let res = |i: usize| Residual::new(&cams[i], i as f32, &imgs[i].1, &imgs[i].0, 0.1);
-        let tr = Tracker::new(res(1), vec![res(0), res(2)], 100.0, &bounds);
-        let t = tr.track(x, y).expect("tracked");
-        let speed = t.velocity.iter().map(|v| v * v).sum::<f32>().sqrt();
-        assert!(speed < 0.2, "{t:?}");
-    }
-
-    #[test]
-    fn a_big_ball_is_tracked_from_a_strided_subset_of_its_pixels() {
-        // A ball whose image in the anchor has several times MAX_HYPOTHESES wrong pixels: the
-        // strided hypotheses and the refinement still find a path on it.
-        let (bounds, cams) = (cube(), five_cameras());
-        let (p0, vel, r) = ([-0.3f32, 0.2, 0.1], [3.0f32, -1.5, 1.0], 0.8f32);
-        let times: Vec<f32> = (0..5).map(|i| i as f32 * 0.1).collect();
-        let pos = |t: f32| -> [f32; 3] { std::array::from_fn(|k| p0[k] + vel[k] * (t - 0.2)) };
-        let imgs: Vec<_> = (0..5)
-            .map(|i| ball(&cams[i], pos(times[i]), r, ORANGE))
-            .collect();
-        let res = |i: usize| Residual::new(&cams[i], times[i], &imgs[i].1, &imgs[i].0, 0.1);
-        let tr = Tracker::new(res(2), vec![res(4), res(1), res(3), res(0)], 100.0, &bounds);
-        assert!(
-            tr.anchor.len() > 3 * MAX_HYPOTHESES,
-            "{} anchor pixels",
-            tr.anchor.len()
-        );
-        let (x, y) = pixel_of(&cams[2], p0);
-        let t = tr.track(x, y).expect("tracked");
-        // Silhouettes of one colour do not pin a surface point (any point inside the ball at
-        // every time explains them): what matters is that the transient sits on the ball in
-        // every frame of its life.
-        for &ti in &times {
-            let q: [f32; 3] = std::array::from_fn(|k| t.mean[k] + t.velocity[k] * (ti - 0.2));
-            let c = pos(ti);
-            let d = (0..3).map(|k| (q[k] - c[k]).powi(2)).sum::<f32>().sqrt();
-            assert!(
-                d < 1.2 * r,
-                "at t = {ti}: {q:?} is {d} from the centre {c:?}; {t:?}"
-            );
-        }
-    }
-}
+mod tests;
