@@ -26,6 +26,7 @@ pub mod data;
 pub mod error;
 pub mod eval;
 pub mod kernels;
+pub mod linalg;
 pub mod model;
 pub mod reference;
 pub mod report;

@@ -23,7 +23,7 @@ pub fn solve_slowest(n: [[f64; 6]; 6], b: [f64; 6], s_rms: f64) -> Option<[f64; 
     let ns: [[f64; 6]; 6] =
         std::array::from_fn(|i| std::array::from_fn(|j| n[i][j] / (d(i) * d(j))));
     let bs: [f64; 6] = std::array::from_fn(|i| b[i] / d(i));
-    let (vals, vecs) = jacobi6(ns);
+    let (vals, vecs) = crate::linalg::jacobi(ns);
     let top = vals.iter().fold(0f64, |m, v| m.max(*v));
     if top.is_nan() || top <= 0.0 {
         return None;
@@ -64,50 +64,6 @@ pub fn solve_slowest(n: [[f64; 6]; 6], b: [f64; 6], s_rms: f64) -> Option<[f64; 
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
-/// Eigenvalues and eigenvectors (columns) of a symmetric 6×6 matrix, cyclic Jacobi.
-fn jacobi6(mut a: [[f64; 6]; 6]) -> ([f64; 6], [[f64; 6]; 6]) {
-    let mut v = [[0f64; 6]; 6];
-    for (i, row) in v.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    for _sweep in 0..50 {
-        let off: f64 = (0..6)
-            .flat_map(|i| (0..6).filter(move |&j| j != i).map(move |j| (i, j)))
-            .map(|(i, j)| a[i][j] * a[i][j])
-            .sum();
-        let diag: f64 = (0..6).map(|i| a[i][i] * a[i][i]).sum();
-        if off <= 1e-30 * diag.max(1e-300) {
-            break;
-        }
-        for p in 0..6 {
-            for q in p + 1..6 {
-                if a[p][q].abs() < 1e-300 {
-                    continue;
-                }
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let sign = if theta >= 0.0 { 1.0 } else { -1.0 };
-                let t = sign / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for row in a.iter_mut() {
-                    let (akp, akq) = (row[p], row[q]);
-                    row[p] = c * akp - s * akq;
-                    row[q] = s * akp + c * akq;
-                }
-                let (rp, rq) = (a[p], a[q]);
-                a[p] = std::array::from_fn(|k| c * rp[k] - s * rq[k]);
-                a[q] = std::array::from_fn(|k| s * rp[k] + c * rq[k]);
-                for row in v.iter_mut() {
-                    let (vkp, vkq) = (row[p], row[q]);
-                    row[p] = c * vkp - s * vkq;
-                    row[q] = s * vkp + c * vkq;
-                }
-            }
-        }
-    }
-    (std::array::from_fn(|i| a[i][i]), v)
-}
-
 /// A small symmetric positive semi-definite system; a pivot near zero leaves its unknown at 0.
 fn solve_small(mut g: Vec<Vec<f64>>, mut r: Vec<f64>) -> Vec<f64> {
     let m = r.len();
@@ -141,20 +97,6 @@ fn solve_small(mut g: Vec<Vec<f64>>, mut r: Vec<f64>) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn eigenpairs_rebuild_the_matrix() {
-        let a: [[f64; 6]; 6] = std::array::from_fn(|i| {
-            std::array::from_fn(|j| 1.0 / (1.0 + i as f64 + j as f64) + (i == j) as u8 as f64)
-        });
-        let (l, v) = jacobi6(a);
-        for i in 0..6 {
-            for j in 0..6 {
-                let r: f64 = (0..6).map(|k| v[i][k] * l[k] * v[j][k]).sum();
-                assert!((r - a[i][j]).abs() < 1e-10, "{i} {j}: {r} vs {}", a[i][j]);
-            }
-        }
-    }
 
     #[test]
     fn a_pinned_system_is_solved_exactly_and_a_free_direction_goes_slowest() {

@@ -8,7 +8,12 @@ fn look_at(centre: [f32; 3]) -> Camera {
     let fwd = (-c).normalize();
     let right = fwd.cross(glam::Vec3::Z).normalize();
     let down = fwd.cross(right);
-    let rot = [right.to_array(), down.to_array(), fwd.to_array()];
+    camera([right.to_array(), down.to_array(), fwd.to_array()], centre)
+}
+
+/// A 64×64 camera with rows `rot` (its axes in world coordinates) at `centre`.
+fn camera(rot: [[f32; 3]; 3], centre: [f32; 3]) -> Camera {
+    let c = glam::Vec3::from(centre);
     let trans = std::array::from_fn(|r| -glam::Vec3::from(rot[r]).dot(c));
     Camera {
         rot,
@@ -225,18 +230,7 @@ fn a_patch_tells_texture_apart_where_a_colour_does_not() {
 
 /// A camera at `c` looking along +z (no rotation).
 fn forward(c: [f32; 3]) -> Camera {
-    let rot = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    Camera {
-        rot,
-        trans: [-c[0], -c[1], -c[2]],
-        fx: 60.0,
-        fy: 60.0,
-        cx: 32.0,
-        cy: 32.0,
-        width: 64,
-        height: 64,
-        near: 0.01,
-    }
+    camera([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], c)
 }
 
 #[test]
