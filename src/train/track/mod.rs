@@ -259,7 +259,8 @@ impl<'a> Tracker<'a> {
             for &(d0, at, ray) in &there {
                 for &(p2, _) in ray {
                     let v: [f32; 3] = std::array::from_fn(|k| (p2[k] - p[k]) / dt);
-                    if v.iter().map(|x| x * x).sum::<f32>().sqrt() > self.v_max {
+                    let speed = v.iter().map(|x| x * x).sum::<f32>().sqrt();
+                    if speed > self.v_max {
                         continue;
                     }
                     let (mut n, mut cost, mut missed) = (0, d0, 0);
@@ -281,7 +282,6 @@ impl<'a> Tracker<'a> {
                     }
                     // The rays of a slowly turning camera leave a family of (P, v) scaled about
                     // its path that project alike: prefer the slowest member.
-                    let speed = v.iter().map(|x| x * x).sum::<f32>().sqrt();
                     let cost = cost + SPEED_COST * speed / self.v_max;
                     let better = best.map_or(true, |(b, bc, _)| {
                         n > b.explained || (n == b.explained && cost < bc)
@@ -305,7 +305,8 @@ impl<'a> Tracker<'a> {
     /// The grid's best hypothesis refined: the point and velocity closest (least squares) to
     /// the rays of the pixels it explains (the frame's, the anchor's and each other
     /// neighbour's), so the depth grid's step does not become a velocity error of a step per
-    /// frame spacing. The hypothesis stays when the system is degenerate.
+    /// frame spacing; where the rays leave a direction free, the slowest solution. The
+    /// hypothesis stays when the solution is unusable (too fast, behind the camera) or none.
     fn refine(&self, t: Track, here: (u32, u32), at: (u32, u32), c: &Patch) -> Track {
         let anchor = &self.neighbours[0];
         let mut rays = vec![
@@ -350,7 +351,7 @@ impl<'a> Tracker<'a> {
         // straight: there, the slowest track (`solve::solve_slowest`).
         let s_rms = (ss / rays_n as f64).sqrt();
         match solve::solve_slowest(n, b, s_rms) {
-            Some(x) if x.iter().all(|v| v.is_finite()) => {
+            Some(x) => {
                 let mean = std::array::from_fn(|k| x[k] as f32);
                 let velocity: [f32; 3] = std::array::from_fn(|k| x[k + 3] as f32);
                 let speed = velocity.iter().map(|v| v * v).sum::<f32>().sqrt();
@@ -366,7 +367,7 @@ impl<'a> Tracker<'a> {
                     explained: t.explained,
                 }
             }
-            _ => t,
+            None => t,
         }
     }
 }
