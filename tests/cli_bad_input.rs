@@ -78,6 +78,23 @@ fn fixture() -> &'static Fixture {
             "the fixture run trains: {}",
             String::from_utf8_lossy(&o.stderr)
         );
+        // `--background auto` (the fast preset's) is resolved before training: the run says
+        // which and why, config.toml keeps the colour, metrics.json both.
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("background: black (auto: the images carry no alpha"),
+            "{err}"
+        );
+        let cfg = std::fs::read_to_string(run.join("config.toml")).unwrap();
+        assert!(cfg.contains("background = \"black\""), "{cfg}");
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap())
+                .unwrap();
+        assert_eq!(m["background"], "black");
+        assert!(m["background_reason"]
+            .as_str()
+            .unwrap()
+            .contains("no alpha"));
         Fixture { root, scene, run }
     })
 }

@@ -150,6 +150,9 @@ fn check_mujoco(name: &str) {
         "{name}: {:?}",
         ds.warnings
     );
+    // `--background auto` composites it on the floor's colour (white) and warns no more.
+    let pick = data::background::pick_background(&dir).unwrap();
+    assert_eq!(pick.white, warned, "{name}: {}", pick.reason);
 }
 
 #[test]
@@ -176,4 +179,99 @@ fn mujoco_scene7_deformation_loads_with_masks() {
 #[test]
 fn mujoco_scene5_rapid_motion_loads_with_masks() {
     check_mujoco("mujoco-scene5_rapid_motion");
+}
+
+/// `../shared/data/dnerf/<scene>`.
+fn dnerf(scene: &str) -> Option<std::path::PathBuf> {
+    data_util::shared_data(&format!("dnerf/{scene}"))
+}
+
+#[test]
+fn dnerf_first_test_frame_has_the_camera_its_json_gives() {
+    let Some(dir) = dnerf("hook") else {
+        return;
+    };
+    let ds = data::load(&dir, &data_util::opts()).unwrap();
+    // The protocol scores the test split (transforms_test.json: 20 frames; 100 to train).
+    assert_eq!((ds.train.len(), ds.val.len()), (100, 20));
+    let f = &ds.val[0];
+    assert_eq!(f.id, "./test/r_000");
+    assert_eq!(f.time, 0.0);
+    let c = &f.camera;
+    // By hand from transforms_test.json: camera_angle_x 0.6911112070083618 at 400 px gives
+    // fx = fy = 200 / tan(0.3455556) = 555.5555; centre = the matrix's last column; the
+    // camera looks along minus its third column (OpenGL z backward).
+    assert_eq!((c.width, c.height), (400, 400));
+    assert!(
+        (c.fx - 555.555_5).abs() < 1e-3 && (c.fy - c.fx).abs() < 1e-6,
+        "{c:?}"
+    );
+    assert!(c.cx == 200.0 && c.cy == 200.0);
+    let centre = Vec3::new(0.389_316_27, 2.121_521_5, 3.405_521_9);
+    assert!((c.centre() - centre).length() < 1e-5, "{:?}", c.centre());
+    let forward = -Vec3::new(0.096_577_47, 0.526_284_7, 0.844_806);
+    assert!((c.forward() - forward).length() < 1e-5, "{:?}", c.forward());
+    // The object at the origin is in front of the camera, inside the image.
+    let (px, depth) = c.project(Vec3::ZERO).unwrap();
+    assert!(c.contains(px) && depth > 0.0, "{px:?} {depth}");
+}
+
+#[test]
+fn dnerf_split_quirks_lego_val_and_jumpingjacks_stray_copies() {
+    let (Some(lego), Some(jj)) = (dnerf("lego"), dnerf("jumpingjacks")) else {
+        return;
+    };
+    // lego's val split has 11 frames (the others 20); the test split (20) is what is scored.
+    assert_eq!(
+        data::blender::read_transforms(&lego, "val").unwrap().len(),
+        11
+    );
+    assert_eq!(data::blender::val_split_name(&lego), Some("test"));
+    // jumpingjacks carries train/transforms.json-style copies inside its split folders: the
+    // loader reads transforms_<split>.json only (200 train, 20 test frames, images from train/).
+    assert!(jj.join("train/transforms.json").is_file());
+    let opts = LoadOptions {
+        keep_pixels: false,
+        ..data_util::opts()
+    };
+    let ds = data::load(&jj, &opts).unwrap();
+    assert_eq!((ds.train.len(), ds.val.len()), (200, 20));
+    assert!(ds.train.iter().all(|f| f.id.starts_with("./train/r_")));
+    assert!(ds.val.iter().all(|f| f.id.starts_with("./test/r_")));
+}
+
+#[test]
+fn dnerf_rgba_is_composited_on_the_protocols_background() {
+    let Some(dir) = dnerf("mutant") else {
+        return;
+    };
+    // Every D-NeRF view is mostly transparent (one object): `auto` keeps the official black.
+    let pick = data::background::pick_background(&dir).unwrap();
+    assert!(
+        !pick.white && pick.reason.contains("agree"),
+        "{}",
+        pick.reason
+    );
+    let load = |bg: [f32; 3]| {
+        let opts = LoadOptions {
+            background: bg,
+            max_size: Some(100),
+            ..data_util::opts()
+        };
+        data::load(&dir, &opts).unwrap()
+    };
+    let (black, white) = (load([0.0; 3]), load([1.0; 3]));
+    let (b, w) = (&black.val[0].image, &white.val[0].image);
+    // A corner is clear: the background itself. Where the two differ they differ by the
+    // clear fraction (c·a + bg·(1 − a)), never by more than 1.
+    assert_eq!((b.pixel(0, 0), w.pixel(0, 0)), ([0.0; 3], [1.0; 3]));
+    let clear: Vec<f32> = (b.data.iter().zip(&w.data)).map(|(b, w)| w - b).collect();
+    assert!(clear.iter().all(|d| (-1e-6..=1.0 + 1e-6).contains(d)));
+    let opaque = clear.chunks(3).filter(|d| d[0] < 0.01).count() as f32;
+    let n = (b.width * b.height) as f32;
+    assert!(
+        opaque / n > 0.02 && opaque / n < 0.6,
+        "object covers {}",
+        opaque / n
+    );
 }

@@ -279,8 +279,8 @@ pub fn transparency_warning(clear: &[(&str, f32)], background: [f32; 3]) -> Opti
 }
 
 /// A view at least this transparent beside one at most [`OPAQUE_VIEW`] transparent.
-const CLEAR_VIEW: f32 = 0.9;
-const OPAQUE_VIEW: f32 = 0.3;
+pub(crate) const CLEAR_VIEW: f32 = 0.9;
+pub(crate) const OPAQUE_VIEW: f32 = 0.3;
 
 /// The validation split used: `test` when `transforms_test.json` exists, else `val`, else none.
 pub fn val_split_name(dir: &Path) -> Option<&'static str> {
@@ -349,7 +349,9 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> DataResult<Dataset> {
     let clear: Vec<(&str, f32)> = (train_frames.iter().chain(&val_frames))
         .filter_map(|f| f.2.map(|c| (f.0.id.as_str(), c)))
         .collect();
-    warnings.extend(transparency_warning(&clear, opts.background));
+    if !opts.background_from_data {
+        warnings.extend(transparency_warning(&clear, opts.background));
+    }
     let train_frames: Vec<Frame> = train_frames.into_iter().map(|f| f.0).collect();
     let val_frames: Vec<Frame> = val_frames.into_iter().map(|f| f.0).collect();
 

@@ -15,7 +15,13 @@ pub fn report(dir: &Path, opts: &LoadOptions) -> DataResult<String> {
         ..opts.clone()
     };
     let ds = load(dir, &opts)?;
-    Ok(summarise(&ds))
+    let pick = super::background::pick_background(dir)?;
+    Ok(format!(
+        "{}background:  `--background auto` would pick {} ({})\n",
+        summarise(&ds),
+        pick.name(),
+        pick.reason
+    ))
 }
 
 fn v3(v: Vec3) -> String {

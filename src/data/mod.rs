@@ -22,6 +22,7 @@
 //! - images are row-major `H×W×3` f32 in `[0, 1]` (8-bit code value / 255, no transfer-function
 //!   change); motion masks are row-major `H×W` u8 with moving = 1.
 
+pub mod background;
 pub mod blender;
 pub mod builtin;
 pub mod camera;
@@ -160,6 +161,9 @@ pub struct LoadOptions {
     /// Background colour (RGB in `[0,1]`) used to composite RGBA images and to fill pixels that
     /// undistortion maps outside the source image.
     pub background: [f32; 3],
+    /// The background was picked from the images' alpha ([`background::pick_background`]), so
+    /// the loader does not warn that views disagree about what is transparent.
+    pub background_from_data: bool,
     /// Where the initial points come from.
     pub points: PointsPreference,
     /// Number of random points when falling back to random initialisation.
@@ -180,6 +184,7 @@ impl Default for LoadOptions {
             downscale: None,
             max_size: None,
             background: [0.0; 3],
+            background_from_data: false,
             points: PointsPreference::Auto,
             random_points: 100_000,
             seed: 0,

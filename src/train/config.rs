@@ -174,6 +174,10 @@ impl Default for DensifyConfig {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Background {
+    /// Decided from the data before loading (`data::background`): the colour the views'
+    /// transparent pixels agree on, black when they agree or carry no alpha. `train` resolves
+    /// it and records the colour and the reason; what is saved in `config.toml` is the colour.
+    Auto,
     Black,
     White,
     /// A random colour per step (training only; evaluation uses black).
@@ -723,6 +727,9 @@ impl TrainConfig {
             zero_deform_head: true,
             lr: LearningRates::fast(),
             motion_start: 400,
+            // Issue 57: the colour the views' transparent pixels agree on (white for a white
+            // floor seen through from some views; black on D-NeRF and the built-in scene).
+            background: Background::Auto,
             // The scene motion that scored and trained best here (issue 16's note): the fast
             // TV-L1 (4 levels, 2 warps, 10 iterations) solved down to half resolution only.
             flow_preset: "fast".into(),
@@ -833,6 +840,7 @@ impl TrainConfig {
     }
 
     /// How a run loads its dataset (resolution, background of transparent images, seed).
+    /// `auto` loads on black here: `train` resolves it first ([`Self::with_background_from`]).
     pub fn load_options(&self) -> crate::data::LoadOptions {
         let bg = match self.background {
             Background::White => [1.0; 3],
@@ -845,6 +853,25 @@ impl TrainConfig {
             seed: self.seed,
             ..crate::data::LoadOptions::default()
         }
+    }
+
+    /// This configuration with `background = auto` resolved from the dataset at `dir`, and
+    /// what was picked and why (`None` when the background was given).
+    pub fn with_background_from(
+        &self,
+        dir: &std::path::Path,
+    ) -> Result<(TrainConfig, Option<crate::data::background::BackgroundPick>)> {
+        if self.background != Background::Auto {
+            return Ok((self.clone(), None));
+        }
+        let pick = crate::data::background::pick_background(dir)?;
+        let mut c = self.clone();
+        c.background = if pick.white {
+            Background::White
+        } else {
+            Background::Black
+        };
+        Ok((c, Some(pick)))
     }
 
     pub fn to_toml(&self) -> String {

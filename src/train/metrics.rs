@@ -16,6 +16,11 @@ pub struct Report {
     pub dataset: String,
     pub device: String,
     pub iterations: u32,
+    /// The background trained and scored on (`black`, `white`, `random`).
+    pub background: String,
+    /// Why, when `--background auto` picked it (`train` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub background_reason: Option<String>,
     pub num_gaussians: u32,
     pub psnr: f64,
     pub ssim: f64,
@@ -131,6 +136,8 @@ impl Report {
             dataset: c.dataset,
             device: c.device,
             iterations: c.iterations,
+            background: format!("{:?}", cfg.background).to_lowercase(),
+            background_reason: None,
             num_gaussians: c.num_gaussians,
             psnr: mean(per.iter().map(|e| e.psnr)),
             ssim: mean(per.iter().map(|e| e.ssim)),

@@ -217,7 +217,8 @@ impl StepPlan {
             t1 += (z * ast_scale(it, frames.times.len())) as f32;
         }
         let background = match cfg.background {
-            Background::Black => [0.0; 3],
+            // `train` resolves auto before it builds a plan; black is what it loads on.
+            Background::Auto | Background::Black => [0.0; 3],
             Background::White => [1.0; 3],
             Background::Random => {
                 [1, 2, 3].map(|k| hash_uniform(cfg.seed ^ 0xb9, it as u64, k) as f32)

@@ -18,6 +18,7 @@ use crate::train::metrics::{mean, Report, ReportContext};
 use crate::vk::Gpu;
 
 /// What one training run needs besides the device.
+#[derive(Clone)]
 pub struct RunSpec<'a> {
     pub cfg: &'a TrainConfig,
     pub data_dir: PathBuf,
@@ -117,7 +118,19 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
 /// phases: set-up (trainer, resume, run directory, the initial test PSNR), the loop
 /// (`run_loop`), and the finish (final evaluation, outputs, the run's status).
 pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> Result<Report> {
-    let dataset = data::load(&spec.data_dir, &spec.cfg.load_options())?;
+    // `--background auto` is decided from the images before they are composited; from here
+    // on the run (and its config.toml) knows only the colour.
+    let (cfg, pick) = spec.cfg.with_background_from(&spec.data_dir)?;
+    if let Some(p) = &pick {
+        progress.note(&format!("background: {} (auto: {})", p.name(), p.reason));
+    }
+    let spec = &RunSpec {
+        cfg: &cfg,
+        ..spec.clone()
+    };
+    let mut opts = cfg.load_options();
+    opts.background_from_data = pick.is_some();
+    let dataset = data::load(&spec.data_dir, &opts)?;
     progress.note(&format!("device: {}", gpu.info));
     // The loader's warnings were only in `data check`; a run that trains on them says so.
     for w in &dataset.warnings {
@@ -135,7 +148,19 @@ pub fn train_run(gpu: &Gpu, spec: &RunSpec<'_>, progress: &mut dyn Progress) -> 
     };
     let mut log = RunLog::open(&spec.out.join("log.jsonl"))?;
     let stats = train_loop(&mut tr, spec, &ckpt, &mut log, stats, progress)?;
-    finish(gpu, spec, &mut tr, stats, initial_psnr, progress)
+    let ended = Ended {
+        stats,
+        initial_psnr,
+        background_reason: pick.map(|p| p.reason),
+    };
+    finish(gpu, spec, &mut tr, ended, progress)
+}
+
+/// What the run knows at its end besides the trainer.
+struct Ended {
+    stats: LoopStats,
+    initial_psnr: Option<f64>,
+    background_reason: Option<String>,
 }
 
 /// The trainer for `spec`, with an allocation failure explained in terms of the settings.
@@ -237,11 +262,15 @@ fn finish(
     gpu: &Gpu,
     spec: &RunSpec<'_>,
     tr: &mut Trainer<'_>,
-    stats: LoopStats,
-    initial_psnr: Option<f64>,
+    ended: Ended,
     progress: &mut dyn Progress,
 ) -> Result<Report> {
     let (cfg, out) = (spec.cfg, &spec.out);
+    let Ended {
+        stats,
+        initial_psnr,
+        background_reason,
+    } = ended;
     let renders = out.join("renders");
     let mut per = tr.evaluate(true)?;
     for (i, e) in per.iter_mut().enumerate() {
@@ -262,6 +291,7 @@ fn finish(
     };
     let mut metrics = Report::new(cfg, ctx, per);
     metrics.initial_psnr = initial_psnr;
+    metrics.background_reason = background_reason;
     if cfg.transient.mode == super::config::TransientMode::On {
         let g = &tr.model.gaussians;
         metrics.gaussians_canonical = Some(g.deformed());
