@@ -647,10 +647,7 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
     }
     if let Some(p) = &args.json {
         let text = serde_json::to_string_pretty(&rows).expect("rows serialise");
-        std::fs::write(p, text).map_err(|source| Error::Io {
-            path: p.display().to_string(),
-            source,
-        })?;
+        std::fs::write(p, text).map_err(Error::io(p))?;
     }
     Ok(rows)
 }

@@ -1,5 +1,7 @@
 //! The library's error type. Every variant says what was expected and where.
 
+use std::path::Path;
+
 use ash::vk as avk;
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -47,4 +49,15 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
+}
+
+impl Error {
+    /// For `map_err`: an I/O failure on `path` as an [`Error::Io`] that names it
+    /// (`.map_err(Error::io(&path))?`, or `Error::io(&path)(e)` for an error in hand).
+    pub fn io(path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
+        move |source| Error::Io {
+            path: path.display().to_string(),
+            source,
+        }
+    }
 }

@@ -14,13 +14,6 @@ use image::RgbImage;
 
 use crate::error::{Error, Result};
 
-fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
-    move |source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    }
-}
-
 /// Writes `frames` (all one size) as a looping GIF at `fps` frames per second.
 pub fn write_gif(path: &Path, frames: &[RgbImage], fps: u32) -> Result<()> {
     let Some(first) = frames.first() else {
@@ -47,10 +40,10 @@ pub fn write_gif(path: &Path, frames: &[RgbImage], fps: u32) -> Result<()> {
         )));
     }
     if let Some(d) = path.parent() {
-        std::fs::create_dir_all(d).map_err(io(d))?;
+        std::fs::create_dir_all(d).map_err(Error::io(d))?;
     }
     let tmp = path.with_extension("gif.tmp");
-    let file = std::fs::File::create(&tmp).map_err(io(&tmp))?;
+    let file = std::fs::File::create(&tmp).map_err(Error::io(&tmp))?;
     let mut enc = image::codecs::gif::GifEncoder::new_with_speed(std::io::BufWriter::new(file), 10);
     let gif_err = |e: image::ImageError| Error::Invalid(format!("{}: {e}", path.display()));
     enc.set_repeat(image::codecs::gif::Repeat::Infinite)
@@ -62,7 +55,7 @@ pub fn write_gif(path: &Path, frames: &[RgbImage], fps: u32) -> Result<()> {
             .map_err(gif_err)?;
     }
     drop(enc);
-    std::fs::rename(&tmp, path).map_err(io(path))
+    std::fs::rename(&tmp, path).map_err(Error::io(path))
 }
 
 /// CRC-32 (IEEE 802.3, reflected), as zip stores it.
@@ -92,7 +85,7 @@ pub fn crc32(bytes: &[u8]) -> u32 {
 /// past zip's 32-bit fields (4 GiB) are refused rather than written as a broken archive.
 pub fn write_stored_zip(path: &Path, entries: &[(String, PathBuf)]) -> Result<()> {
     let tmp = path.with_extension("zip.tmp");
-    let file = std::fs::File::create(&tmp).map_err(io(&tmp))?;
+    let file = std::fs::File::create(&tmp).map_err(Error::io(&tmp))?;
     let mut w = std::io::BufWriter::new(file);
     let mut central = Vec::new();
     let mut offset: u64 = 0;
@@ -106,7 +99,7 @@ pub fn write_stored_zip(path: &Path, entries: &[(String, PathBuf)]) -> Result<()
         ))
     };
     for (name, src) in entries {
-        let data = std::fs::read(src).map_err(io(src))?;
+        let data = std::fs::read(src).map_err(Error::io(src))?;
         let size = u32::try_from(data.len()).map_err(|_| too_big(name))?;
         let at = u32::try_from(offset).map_err(|_| too_big("the archive"))?;
         let crc = crc32(&data);
@@ -124,8 +117,8 @@ pub fn write_stored_zip(path: &Path, entries: &[(String, PathBuf)]) -> Result<()
         local.extend((n.len() as u16).to_le_bytes());
         local.extend(0u16.to_le_bytes()); // extra length
         local.extend(n);
-        w.write_all(&local).map_err(io(&tmp))?;
-        w.write_all(&data).map_err(io(&tmp))?;
+        w.write_all(&local).map_err(Error::io(&tmp))?;
+        w.write_all(&data).map_err(Error::io(&tmp))?;
         let mut c = Vec::with_capacity(46 + n.len());
         c.extend(0x0201_4b50u32.to_le_bytes()); // central directory header
         c.extend(20u16.to_le_bytes()); // made by: 2.0, MS-DOS attributes
@@ -148,7 +141,7 @@ pub fn write_stored_zip(path: &Path, entries: &[(String, PathBuf)]) -> Result<()
     let cd_at = u32::try_from(offset).map_err(|_| too_big("the archive"))?;
     let count = u16::try_from(entries.len())
         .map_err(|_| Error::Invalid(format!("{}: more than 65535 frames", path.display())))?;
-    w.write_all(&central).map_err(io(&tmp))?;
+    w.write_all(&central).map_err(Error::io(&tmp))?;
     let mut end = Vec::with_capacity(22);
     end.extend(0x0605_4b50u32.to_le_bytes()); // end of central directory
     end.extend([0u8; 4]); // this disk, central directory's disk
@@ -157,12 +150,12 @@ pub fn write_stored_zip(path: &Path, entries: &[(String, PathBuf)]) -> Result<()
     end.extend((central.len() as u32).to_le_bytes());
     end.extend(cd_at.to_le_bytes());
     end.extend(0u16.to_le_bytes()); // comment length
-    w.write_all(&end).map_err(io(&tmp))?;
+    w.write_all(&end).map_err(Error::io(&tmp))?;
     w.into_inner()
-        .map_err(|e| io(&tmp)(e.into_error()))?
+        .map_err(|e| Error::io(&tmp)(e.into_error()))?
         .sync_all()
-        .map_err(io(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(io(path))
+        .map_err(Error::io(&tmp))?;
+    std::fs::rename(&tmp, path).map_err(Error::io(path))
 }
 
 #[cfg(test)]

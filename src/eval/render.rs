@@ -268,10 +268,7 @@ pub fn run_render(a: &RenderArgs) -> Result<Vec<PathBuf>> {
     times.dedup();
     if a.ply {
         let dir = out.join("ply");
-        std::fs::create_dir_all(&dir).map_err(|source| Error::Io {
-            path: dir.display().to_string(),
-            source,
-        })?;
+        std::fs::create_dir_all(&dir).map_err(Error::io(&dir))?;
         // The canonical population (what the deformation moves); the transients' own file
         // beside it, as the run writes them.
         let (canonical, transients) = tr.gaussians()?.split_transients();

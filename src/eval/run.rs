@@ -62,10 +62,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     };
     let cfg = TrainConfig::from_toml_over(&TrainConfig::paper(), &need("config.toml")?)?;
     let metrics_path = need("metrics.json")?;
-    let text = std::fs::read_to_string(&metrics_path).map_err(|source| Error::Io {
-        path: metrics_path.display().to_string(),
-        source,
-    })?;
+    let text = std::fs::read_to_string(&metrics_path).map_err(Error::io(&metrics_path))?;
     let m: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
         invalid(
             &metrics_path,
@@ -149,10 +146,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
         }
     }
     let weights = need("deform.bin")?;
-    let bytes = std::fs::read(&weights).map_err(|source| Error::Io {
-        path: weights.display().to_string(),
-        source,
-    })?;
+    let bytes = std::fs::read(&weights).map_err(Error::io(&weights))?;
     // The MLP's size follows from config.toml and the dataset's kind (its time encoding).
     let synthetic = data::detect_format(&data_dir)? == data::Format::Blender;
     let floats = MlpLayout::new(&mlp_config_of(synthetic, cfg.mlp_shape()))?.total;
@@ -181,10 +175,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     }
     let dyn_path = dir.join("dynamic.bin");
     let dynamic = if dyn_path.is_file() {
-        let b = std::fs::read(&dyn_path).map_err(|source| Error::Io {
-            path: dyn_path.display().to_string(),
-            source,
-        })?;
+        let b = std::fs::read(&dyn_path).map_err(Error::io(&dyn_path))?;
         // One row per canonical Gaussian (point_cloud.ply's; transients are never split).
         let canonical = gaussians.canonical();
         let want = 4 * DYN_ROW * canonical;
@@ -221,10 +212,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     let nodes_path = dir.join("nodes.bin");
     let nodes = match cfg.deform_field.kind {
         FieldKind::Nodes if nodes_path.is_file() => {
-            let b = std::fs::read(&nodes_path).map_err(|source| Error::Io {
-                path: nodes_path.display().to_string(),
-                source,
-            })?;
+            let b = std::fs::read(&nodes_path).map_err(Error::io(&nodes_path))?;
             let max = cfg.deform_field.nodes as usize;
             if b.len() % 16 != 0 || b.is_empty() || b.len() > 16 * max {
                 return Err(invalid(
@@ -393,10 +381,7 @@ fn eval_one(
         r.set_lpips(&s.source);
     }
     // With --no-pictures no PNG has created the directory yet.
-    std::fs::create_dir_all(&out).map_err(|source| Error::Io {
-        path: out.display().to_string(),
-        source,
-    })?;
+    std::fs::create_dir_all(&out).map_err(Error::io(&out))?;
     write_atomic(&out.join("metrics.json"), r.to_json().as_bytes())?;
     let t = table(std::slice::from_ref(&r)).to_markdown();
     write_atomic(&out.join("table.md"), t.as_bytes())?;

@@ -261,10 +261,7 @@ fn checkpoints(a: &SignalArgs) -> Result<Vec<PathBuf>> {
     }
     let dir = a.run.join("checkpoints");
     let mut kept: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .map_err(|source| Error::Io {
-            path: dir.display().to_string(),
-            source,
-        })?
+        .map_err(Error::io(&dir))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| is_kept_checkpoint(p))
         .collect();

@@ -66,23 +66,19 @@ pub fn labelled_strip(panels: &[(&str, &RgbImage)]) -> Result<RgbImage> {
 /// `path.with_extension("png.tmp")` first and are renamed into place, so a reader never sees
 /// a half-written file.
 pub fn save_png(img: &RgbImage, path: &Path) -> Result<()> {
-    let io_err = |p: &Path, source: std::io::Error| Error::Io {
-        path: p.display().to_string(),
-        source,
-    };
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
+        std::fs::create_dir_all(dir).map_err(Error::io(dir))?;
     }
     let mut bytes = Vec::new();
     img.write_to(&mut Cursor::new(&mut bytes), ImageFormat::Png)
-        .map_err(|e| io_err(path, std::io::Error::other(e)))?;
+        .map_err(|e| Error::io(path)(std::io::Error::other(e)))?;
     let tmp = path.with_extension("png.tmp");
     std::fs::write(&tmp, &bytes).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
-        io_err(&tmp, e)
+        Error::io(&tmp)(e)
     })?;
     std::fs::rename(&tmp, path).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
-        io_err(path, e)
+        Error::io(path)(e)
     })
 }

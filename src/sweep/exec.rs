@@ -18,13 +18,6 @@ use crate::train::checkpoint::write_atomic;
 const TRAIN_OK: &str = "train.ok";
 const EVAL_OK: &str = "eval.ok";
 
-fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
-    move |source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    }
-}
-
 /// What the cells share: the binary, the sweep root, LPIPS weights.
 pub struct CellEnv {
     pub exe: PathBuf,
@@ -68,7 +61,7 @@ impl CellEnv {
     /// Runs (or finishes) one cell and writes its `cell.json`.
     pub fn run_cell(&self, c: &Cell) -> Result<CellResult> {
         let dir = self.cell_dir(c);
-        std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+        std::fs::create_dir_all(&dir).map_err(Error::io(&dir))?;
         let run = dir.join("run");
         let config = if c.config_toml.is_empty() {
             None
@@ -112,15 +105,15 @@ impl CellEnv {
             .create(true)
             .append(true)
             .open(&log)
-            .map_err(io(&log))?;
-        let f2 = f.try_clone().map_err(io(&log))?;
+            .map_err(Error::io(&log))?;
+        let f2 = f.try_clone().map_err(Error::io(&log))?;
         let status = Command::new(&self.exe)
             .args(args)
             .stdin(Stdio::null())
             .stdout(f)
             .stderr(f2)
             .status()
-            .map_err(io(&self.exe))?;
+            .map_err(Error::io(&self.exe))?;
         if status.success() {
             return Ok(());
         }
@@ -137,13 +130,13 @@ impl CellEnv {
 
     fn result(&self, c: &Cell, run: &Path, cell_seconds: f64) -> Result<CellResult> {
         let read = |p: PathBuf| -> Result<serde_json::Value> {
-            let t = std::fs::read_to_string(&p).map_err(io(&p))?;
+            let t = std::fs::read_to_string(&p).map_err(Error::io(&p))?;
             serde_json::from_str(&t).map_err(|e| Error::Invalid(format!("{}: {e}", p.display())))
         };
         let train = read(run.join("metrics.json"))?;
         let eval = read(run.join("eval").join("metrics.json"))?;
         let cfg_path = run.join("config.toml");
-        let cfg_text = std::fs::read_to_string(&cfg_path).map_err(io(&cfg_path))?;
+        let cfg_text = std::fs::read_to_string(&cfg_path).map_err(Error::io(&cfg_path))?;
         let config: toml::Value = toml::from_str(&cfg_text)
             .map_err(|e| Error::Invalid(format!("{}: {e}", cfg_path.display())))?;
         let f = |v: &serde_json::Value, k: &str| v.get(k).and_then(serde_json::Value::as_f64);
@@ -213,7 +206,7 @@ impl CellEnv {
 /// The `status` of the finished run in `run` (its `metrics.json`; `None` when it has none).
 pub fn cell_status(run: &Path) -> Result<Option<String>> {
     let p = run.join("metrics.json");
-    let t = std::fs::read_to_string(&p).map_err(io(&p))?;
+    let t = std::fs::read_to_string(&p).map_err(Error::io(&p))?;
     let v: serde_json::Value =
         serde_json::from_str(&t).map_err(|e| Error::Invalid(format!("{}: {e}", p.display())))?;
     Ok(v.get("status")

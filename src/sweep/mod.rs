@@ -154,10 +154,7 @@ pub fn run(a: &SweepArgs) -> Result<()> {
         println!("{}", summary(&r));
         return Ok(());
     }
-    std::fs::create_dir_all(&root).map_err(|source| Error::Io {
-        path: root.display().to_string(),
-        source,
-    })?;
+    std::fs::create_dir_all(&root).map_err(Error::io(&root))?;
     let meta = SweepMeta::of(&plan, path, &cells);
     write_atomic(
         &root.join(META),
@@ -297,10 +294,7 @@ pub fn write_report(
     }
     let grid = tables::Grid::new(results);
     let dir = root.join("tables");
-    std::fs::create_dir_all(&dir).map_err(|source| Error::Io {
-        path: dir.display().to_string(),
-        source,
-    })?;
+    std::fs::create_dir_all(&dir).map_err(Error::io(&dir))?;
     let mut md = format!(
         "# Sweep report\n\n{} cells: {} scene(s) × {} variant(s); regenerate with \
          `dispflow-vk sweep report {}`.\n",

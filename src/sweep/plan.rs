@@ -164,10 +164,7 @@ struct TrainOnly {
 impl Plan {
     /// Reads and checks a plan; every cell's flags and config are resolved as `train` would.
     pub fn load(path: &Path) -> Result<(Plan, Vec<Cell>)> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path).map_err(Error::io(path))?;
         let plan: Plan = toml::from_str(&text)
             .map_err(|e| Error::Invalid(format!("plan {}: {e}", path.display())))?;
         let base = path.parent().unwrap_or(Path::new("."));

@@ -57,16 +57,9 @@ pub struct CellResult {
 pub const RESULTS: &str = "results.jsonl";
 pub const CELL_JSON: &str = "cell.json";
 
-fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
-    move |source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    }
-}
-
 /// Reads `results.jsonl`; a malformed line is refused with its line number.
 pub fn read_results(path: &Path) -> Result<Vec<CellResult>> {
-    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    let text = std::fs::read_to_string(path).map_err(Error::io(path))?;
     text.lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty())
@@ -83,7 +76,7 @@ pub fn read_results(path: &Path) -> Result<Vec<CellResult>> {
 }
 
 pub fn read_cell(path: &Path) -> Result<CellResult> {
-    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    let text = std::fs::read_to_string(path).map_err(Error::io(path))?;
     serde_json::from_str(&text)
         .map_err(|e| Error::Invalid(format!("{}: not a cell result: {e}", path.display())))
 }

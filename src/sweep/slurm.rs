@@ -84,10 +84,7 @@ pub fn write_scripts(
     let (exe, plan, root) = (abs(exe), abs(plan), abs(root));
     let dir = root.join("slurm");
     let logs = dir.join("logs");
-    std::fs::create_dir_all(&logs).map_err(|source| Error::Io {
-        path: logs.display().to_string(),
-        source,
-    })?;
+    std::fs::create_dir_all(&logs).map_err(Error::io(&logs))?;
     let job = format!("dispflow-{}", super::plan::safe(name));
     let mut cells = header(&job, &logs.join("cell_%a.out"), Some(spec));
     cells += &format!("#SBATCH --array={}%{jobs}\n", array_spec(todo));

@@ -87,13 +87,6 @@ pub fn fnv1a64(bytes: &[u8]) -> u64 {
     })
 }
 
-fn io_err(path: &Path, source: std::io::Error) -> Error {
-    Error::Io {
-        path: path.display().to_string(),
-        source,
-    }
-}
-
 fn take_gauss(
     prefix: &str,
     m: &mut BTreeMap<String, Vec<f32>>,
@@ -197,11 +190,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     };
     if let Err(e) = write() {
         let _ = std::fs::remove_file(&tmp);
-        return Err(io_err(&tmp, e));
+        return Err(Error::io(&tmp)(e));
     }
     if let Err(e) = std::fs::rename(&tmp, path) {
         let _ = std::fs::remove_file(&tmp);
-        return Err(io_err(path, e));
+        return Err(Error::io(path)(e));
     }
     if let Some(dir) = path.parent().and_then(|d| std::fs::File::open(d).ok()) {
         let _ = dir.sync_all(); // make the rename itself durable where the platform allows
@@ -280,7 +273,7 @@ impl Checkpoint {
     /// Reads and checks a checkpoint: magic, format version, header checksum, every blob's
     /// length and checksum, counts that agree. Values are checked by the restore.
     pub fn load(path: &Path) -> Result<Checkpoint> {
-        let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+        let bytes = std::fs::read(path).map_err(Error::io(path))?;
         if bytes.len() < 16 || &bytes[..8] != MAGIC {
             return Err(bad(path, "wrong magic (expected DFVKCKPT)"));
         }
@@ -582,7 +575,7 @@ pub fn write_ply(path: &Path, g: &HostGaussians) -> Result<()> {
 
 /// Reads a PLY written by [`write_ply`] (or by 3DGS) back into Gaussians.
 pub fn read_ply(path: &Path) -> Result<HostGaussians> {
-    let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+    let bytes = std::fs::read(path).map_err(Error::io(path))?;
     let bad = |why: &str| Error::Invalid(format!("{}: {why}", path.display()));
     let end = bytes
         .windows(11)

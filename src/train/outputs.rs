@@ -12,13 +12,6 @@ use crate::error::{Error, Result};
 use crate::model::dynamic::SplitSnapshot;
 use crate::report::{self, Plot, Series, PALETTE};
 
-fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
-    move |source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    }
-}
-
 /// One line of a run's `log.jsonl` (every `log_interval` iterations).
 #[derive(Debug, Default, Serialize, serde::Deserialize)]
 pub struct LogLine {
@@ -100,13 +93,13 @@ pub(crate) fn remove_stale_outputs(out: &Path, fresh: bool) -> Result<()> {
             // `signal` would score another run's models.
             let kept = super::checkpoint::is_kept_checkpoint(&p);
             if (p.extension().is_some_and(|x| x == "tmp") || (fresh && kept)) && p.is_file() {
-                std::fs::remove_file(&p).map_err(io(&p))?;
+                std::fs::remove_file(&p).map_err(Error::io(&p))?;
             }
         }
     }
     let m = out.join("metrics.json");
     if m.is_file() {
-        std::fs::remove_file(&m).map_err(io(&m))?;
+        std::fs::remove_file(&m).map_err(Error::io(&m))?;
     }
     Ok(())
 }
@@ -130,7 +123,7 @@ pub(crate) fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
     let bytes = match std::fs::read(path) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-        Err(e) => return Err(io(path)(e)),
+        Err(e) => return Err(Error::io(path)(e)),
     };
     let text = String::from_utf8_lossy(&bytes);
     let mut keep = String::new();
@@ -206,10 +199,7 @@ pub fn frame_png(i: usize, id: &str) -> String {
 
 /// Reads a run's `log.jsonl`, naming the line of a malformed entry.
 pub fn read_log(path: &Path) -> Result<Vec<LogLine>> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
+    let text = std::fs::read_to_string(path).map_err(Error::io(path))?;
     text.lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty())

@@ -13,13 +13,6 @@ use super::session::{Progress, RunSpec};
 use super::Trainer;
 use crate::error::{Error, Result};
 
-fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
-    move |source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    }
-}
-
 /// `log.jsonl`, open for appending.
 pub(super) struct RunLog {
     path: PathBuf,
@@ -31,7 +24,7 @@ impl RunLog {
         let file = std::fs::OpenOptions::new()
             .append(true)
             .open(path)
-            .map_err(io(path))?;
+            .map_err(Error::io(path))?;
         Ok(RunLog {
             path: path.to_path_buf(),
             file,
@@ -41,7 +34,7 @@ impl RunLog {
     pub fn write(&mut self, line: &LogLine) -> Result<()> {
         let text = serde_json::to_string(line).expect("log line serialises");
         std::io::Write::write_all(&mut self.file, format!("{text}\n").as_bytes())
-            .map_err(io(&self.path))
+            .map_err(Error::io(&self.path))
     }
 
     /// Drops the lines after `iteration` (a rollback's abandoned branch). The cut replaces

@@ -106,13 +106,6 @@ impl Progress for Quiet {
     fn finish(&mut self) {}
 }
 
-fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
-    move |source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    }
-}
-
 /// Trains `spec` on `gpu` to its configured iterations (resuming when asked), writes every
 /// output of a run into `spec.out` and returns the metrics it wrote to `metrics.json`. Three
 /// phases: set-up (trainer, resume, run directory, the initial test PSNR), the loop
@@ -215,7 +208,7 @@ fn prepare_run_dir(
             ))
         })?;
     }
-    std::fs::create_dir_all(out.join("checkpoints")).map_err(io(out))?;
+    std::fs::create_dir_all(out.join("checkpoints")).map_err(Error::io(out))?;
     remove_stale_outputs(out, !resume)?;
     let log_path = out.join("log.jsonl");
     if resume {
@@ -354,7 +347,7 @@ fn write_model_files(gpu: &Gpu, tr: &mut Trainer<'_>, out: &Path) -> Result<()> 
     if !transients.is_empty() {
         write_ply(&tpath, &transients)?;
     } else if tpath.is_file() {
-        std::fs::remove_file(&tpath).map_err(io(&tpath))?;
+        std::fs::remove_file(&tpath).map_err(Error::io(&tpath))?;
     }
     let mlp = tr.model.deform.download(gpu)?;
     write_atomic(&out.join("deform.bin"), bytemuck::cast_slice(&mlp))?;
@@ -370,7 +363,7 @@ fn write_model_files(gpu: &Gpu, tr: &mut Trainer<'_>, out: &Path) -> Result<()> 
     {
         Some(d) => write_atomic(&dynamic_bin, &super::outputs::dynamic_bin(&d))?,
         None if dynamic_bin.is_file() => {
-            std::fs::remove_file(&dynamic_bin).map_err(io(&dynamic_bin))?
+            std::fs::remove_file(&dynamic_bin).map_err(Error::io(&dynamic_bin))?
         }
         None => {}
     }
