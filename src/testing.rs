@@ -1,5 +1,6 @@
-//! Helpers for the conformance tests and benches: one shared validated device per process, and
-//! deterministic noise.
+//! Helpers for the conformance tests and benches: one shared validated device per process,
+//! deterministic noise and uniform draws ([`Noise`]), and the comparisons of results with their
+//! references ([`assert_close`] with a [`Tol`], [`max_abs`]).
 //!
 //! The validation layer (1.3.239) crashes now and then when several validated devices submit
 //! from parallel threads, so every test in a binary shares one device behind a mutex: GPU tests
@@ -148,6 +149,138 @@ impl Noise {
     pub fn u64s(&mut self, n: usize) -> Vec<u64> {
         (0..n).map(|_| self.next_u64()).collect()
     }
+
+    /// `lo + (hi − lo)·u`, computed in `F`, with `u = next_u32() / 2³²` rounded once to `F`.
+    ///
+    /// In `f64`, `u` is exact: one of the 2³² values `k / 2³²` in `[0, 1 − 2⁻³²]`. In `f32`,
+    /// `u` keeps 24 bits and the top 128 draws (probability 2⁻²⁵) round to exactly 1. So the
+    /// result lies in `[lo, hi]`, `hi` included (in f32 through `u = 1`, in either type when
+    /// `lo + (hi − lo)·u` rounds up), and `lo` itself comes with probability 2⁻³². A caller
+    /// that needs draws above 0 adds half a step, `0.5 / 2³²`, itself.
+    pub fn uniform<F: Real>(&mut self, lo: F, hi: F) -> F {
+        lo + (hi - lo) * F::unit(self.next_u32())
+    }
+
+    /// `n` draws of [`Noise::uniform`] in order.
+    pub fn uniforms<F: Real>(&mut self, n: usize, lo: F, hi: F) -> Vec<F> {
+        (0..n).map(|_| self.uniform(lo, hi)).collect()
+    }
+}
+
+/// The float types [`Noise::uniform`] draws: `f32` and `f64`.
+pub trait Real:
+    Copy + std::ops::Add<Output = Self> + std::ops::Sub<Output = Self> + std::ops::Mul<Output = Self>
+{
+    /// `bits / 2³²`, rounded once to this type.
+    fn unit(bits: u32) -> Self;
+}
+
+impl Real for f32 {
+    fn unit(bits: u32) -> f32 {
+        bits as f32 / 4_294_967_296.0
+    }
+}
+
+impl Real for f64 {
+    fn unit(bits: u32) -> f64 {
+        bits as f64 / 4_294_967_296.0
+    }
+}
+
+/// How far a result may stray from its reference. The bounds are named at every use, so they
+/// cannot trade places, and so is what `rel` scales.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Tol {
+    /// `|got[i] − want[i]| ≤ abs + rel·|want[i]|` for every `i`.
+    Elementwise { abs: f64, rel: f64 },
+    /// `|got[i] − want[i]| ≤ abs + rel·max_j |want[j]|` for every `i`: one scale per tensor,
+    /// for values whose f32 error follows the tensor's magnitude rather than each value's
+    /// (sums of many products, gradients).
+    Normwise { abs: f64, rel: f64 },
+}
+
+impl Tol {
+    /// The largest `|got − want|` allowed where `|want| = want_abs`, in a slice whose largest
+    /// `|want|` is `scale`.
+    fn allowed(self, want_abs: f64, scale: f64) -> f64 {
+        match self {
+            Tol::Elementwise { abs, rel } => abs + rel * want_abs,
+            Tol::Normwise { abs, rel } => abs + rel * scale,
+        }
+    }
+}
+
+/// What a passing [`assert_close`] measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Closeness {
+    /// The largest `|got − want|`.
+    pub max_diff: f64,
+    /// The largest `|want|`.
+    pub scale: f64,
+    /// The largest `|got − want|` over what the tolerance allowed there (at most 1).
+    pub worst_ratio: f64,
+}
+
+impl Closeness {
+    /// The normwise relative error `max |got − want| / max |want|` (0 for an all-zero
+    /// reference).
+    pub fn normwise(&self) -> f64 {
+        if self.scale > 0.0 {
+            self.max_diff / self.scale
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Asserts that `got` and `want` have the same length, hold only finite values, and are within
+/// `tol` of each other everywhere; the failure names `what`, the worst element (the largest
+/// `|got − want|` over what `tol` allows there) and the bound.
+#[track_caller]
+pub fn assert_close<G, W>(what: &str, got: &[G], want: &[W], tol: Tol) -> Closeness
+where
+    G: Copy + Into<f64>,
+    W: Copy + Into<f64>,
+{
+    assert_eq!(got.len(), want.len(), "{what}: length");
+    let scale = max_abs(want.iter().map(|&w| w.into()));
+    let mut c = Closeness {
+        max_diff: 0.0,
+        scale,
+        worst_ratio: 0.0,
+    };
+    // The worst element: a failing one before any passing one, then by `diff / allowed`.
+    let mut worst: Option<(bool, f64, usize)> = None;
+    for (i, (&g, &w)) in got.iter().zip(want).enumerate() {
+        let (g, w): (f64, f64) = (g.into(), w.into());
+        assert!(
+            g.is_finite() && w.is_finite(),
+            "{what}[{i}]: got {g}, want {w} (not finite)"
+        );
+        let (diff, allowed) = ((g - w).abs(), tol.allowed(w.abs(), scale));
+        c.max_diff = c.max_diff.max(diff);
+        let ratio = if diff == 0.0 { 0.0 } else { diff / allowed };
+        let key = (diff > allowed, ratio);
+        if worst.map_or(ratio > 0.0, |(f, r, _)| key > (f, r)) {
+            worst = Some((key.0, ratio, i));
+        }
+    }
+    if let Some((failed, ratio, i)) = worst {
+        let (g, w): (f64, f64) = (got[i].into(), want[i].into());
+        let (diff, allowed) = ((g - w).abs(), tol.allowed(w.abs(), scale));
+        assert!(
+            !failed,
+            "{what}[{i}]: got {g}, want {w}: |diff| {diff:.3e} > {allowed:.3e} allowed by {tol:?} \
+             (max |want| {scale:.3e})"
+        );
+        c.worst_ratio = ratio;
+    }
+    c
+}
+
+/// The largest `|x|` of `v`; 0 for none, and NaN entries are passed over (as `f64::max` does).
+pub fn max_abs(v: impl IntoIterator<Item = impl std::borrow::Borrow<f64>>) -> f64 {
+    v.into_iter().fold(0.0, |m, x| m.max(x.borrow().abs()))
 }
 
 /// Fills a device buffer with noise so no kernel can rely on zero-initialised memory.
@@ -273,4 +406,91 @@ pub fn isolated_home<'a>(
         cmd.env("MESA_SHADER_CACHE_DIR", dir);
     }
     cmd
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uniform_draws_are_the_documented_ones() {
+        // f64 keeps all 32 bits: never 1. f32 rounds the top draws up to exactly 1.
+        assert_eq!(f64::unit(u32::MAX), 1.0 - 2f64.powi(-32));
+        assert_eq!(f32::unit(u32::MAX), 1.0);
+        assert_eq!(f32::unit(u32::MAX - 127), 1.0); // the top 128 draws
+        assert!(f32::unit(u32::MAX - 128) < 1.0);
+        let (mut a, mut b) = (Noise::new(7), Noise::new(7));
+        for _ in 0..1000 {
+            let x = b.next_u32();
+            let v: f32 = a.uniform(-2.0, 3.0);
+            assert_eq!(v, -2.0 + 5.0 * (x as f32 / 4_294_967_296.0));
+            assert!((-2.0..=3.0).contains(&v));
+        }
+        let v: Vec<f64> = Noise::new(3).uniforms(5, 0.0, 1.0);
+        let want: Vec<f64> = Noise::new(3)
+            .u32s(5)
+            .iter()
+            .map(|&x| x as f64 / 4_294_967_296.0)
+            .collect();
+        assert_eq!(v, want);
+    }
+
+    #[test]
+    fn assert_close_scales_rel_by_each_value_or_the_largest() {
+        let (got, want) = ([100.05f32, 1.002], [100.0f64, 1.0]);
+        let passes = |tol| std::panic::catch_unwind(|| assert_close("t", &got, &want, tol)).is_ok();
+        // 2e-3 relative at the small value, 5e-4 at the large one…
+        assert!(!passes(Tol::Elementwise {
+            abs: 0.0,
+            rel: 1e-3
+        }));
+        assert!(passes(Tol::Elementwise {
+            abs: 0.0,
+            rel: 2.5e-3
+        }));
+        assert!(!passes(Tol::Elementwise {
+            abs: 1e-3,
+            rel: 0.0
+        }));
+        // …but both within 1e-3 of the largest |want|.
+        assert!(passes(Tol::Normwise {
+            abs: 0.0,
+            rel: 1e-3
+        }));
+        let c = assert_close(
+            "t",
+            &got,
+            &want,
+            Tol::Normwise {
+                abs: 0.0,
+                rel: 1e-3,
+            },
+        );
+        assert!((c.max_diff - 0.05).abs() < 1e-5 && c.scale == 100.0);
+        assert!((c.normwise() - 5e-4).abs() < 1e-7 && c.worst_ratio <= 1.0);
+        // Exact equality passes a zero tolerance; non-finite values never pass.
+        assert_close(
+            "t",
+            &[0.0f32, 2.0],
+            &[0.0f64, 2.0],
+            Tol::Normwise { abs: 0.0, rel: 0.0 },
+        );
+        let nan = std::panic::catch_unwind(|| {
+            assert_close(
+                "t",
+                &[f32::NAN],
+                &[1.0f64],
+                Tol::Normwise { abs: 1.0, rel: 1.0 },
+            )
+        });
+        assert!(nan.is_err());
+    }
+
+    #[test]
+    fn max_abs_takes_values_or_references() {
+        assert_eq!(max_abs([1.0, -3.0, f64::NAN, 2.0]), 3.0);
+        let v: &[f64] = &[-0.5, 0.25];
+        assert_eq!(max_abs(v), 0.5);
+        assert_eq!(max_abs(std::iter::empty::<f64>()), 0.0);
+    }
 }

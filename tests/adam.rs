@@ -13,10 +13,6 @@ use dispflow_vk::reference::adam::adam_step;
 use dispflow_vk::testing::{self, Noise};
 use dispflow_vk::vk::{Buffer, Gpu, Recorder};
 
-fn unif(noise: &mut Noise, lo: f32, hi: f32) -> f32 {
-    lo + (hi - lo) * (noise.next_u32() as f32 / u32::MAX as f32)
-}
-
 struct Bufs {
     p: Buffer,
     g: Buffer,
@@ -64,7 +60,7 @@ fn adam_matches_scalar_reference_over_steps_with_groups_and_mask() {
     let (split, row_len) = (3_001usize, 3usize); // group 1: rows of 3 floats from `split`
     let rows = (n - split).div_ceil(row_len);
     let mut noise = Noise::new(1);
-    let mut p: Vec<f32> = (0..n).map(|_| unif(&mut noise, -2.0, 2.0)).collect();
+    let mut p: Vec<f32> = (0..n).map(|_| noise.uniform(-2.0, 2.0)).collect();
     let mask: Vec<u32> = (0..rows).map(|r| (r % 3 != 1) as u32).collect();
     let (mut m, mut v) = (vec![0.0f32; n], vec![0.0f32; n]);
     let mut m_abs = vec![0.0f32; n];
@@ -89,7 +85,7 @@ fn adam_matches_scalar_reference_over_steps_with_groups_and_mask() {
                 if (100..200).contains(&i) {
                     0.0
                 } else {
-                    unif(&mut noise, -1.0, 1.0) * 10f32.powi((i % 7) as i32 - 3)
+                    noise.uniform(-1.0, 1.0) * 10f32.powi((i % 7) as i32 - 3)
                 }
             })
             .collect();

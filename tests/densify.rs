@@ -27,9 +27,9 @@ use dispflow_vk::testing::{self, Noise, TestGpu};
 use dispflow_vk::vk::{Buffer, Recorder};
 use raster_common::*;
 
-fn uniform(r: &mut Noise) -> f32 {
-    (r.next_u32() as f32 + 0.5) / 4_294_967_296.0
-}
+/// Half a step of [`Noise::uniform`]'s 32-bit draws, added to this file's draws: they have
+/// always been `(next_u32() + 0.5) / 2³²`, never 0.
+const HALF_STEP: f32 = 0.5 / 4_294_967_296.0;
 
 /// Random Gaussians spread over every densify case for extent 2 (clone if max log-scale <=
 /// ln 0.02 ≈ −3.9, world prune above ln 0.2 ≈ −1.6) and min opacity 0.005 (logit ≈ −5.3).
@@ -41,7 +41,7 @@ fn random_gaussians(seed: u64, n: usize, sh_degree: u32) -> HostGaussians {
         ..Default::default()
     };
     for i in 0..n {
-        let mut u = || uniform(&mut r);
+        let mut u = || r.uniform(0.0, 1.0) + HALF_STEP;
         g.means
             .push([4.0 * u() - 2.0, 4.0 * u() - 2.0, 2.0 + 4.0 * u()]);
         g.log_scales
@@ -77,8 +77,8 @@ fn random_stats(seed: u64, n: usize, cap: usize) -> DensifyStats {
     for i in 0..n {
         let d = (r.next_u32() % 6) as f32;
         s.denom[i] = d;
-        s.grad_accum[i] = d * 0.0002 * 2.0 * uniform(&mut r);
-        s.max_radii[i] = (40.0 * uniform(&mut r)).floor();
+        s.grad_accum[i] = d * 0.0002 * 2.0 * (r.uniform(0.0, 1.0) + HALF_STEP);
+        s.max_radii[i] = (40.0 * (r.uniform(0.0, 1.0) + HALF_STEP)).floor();
         match i % 50 {
             3 => {
                 s.denom[i] = 0.0;
@@ -656,7 +656,7 @@ fn stats_match_twin_over_views() {
     let mut want = DensifyStats::zeros(cap);
     let mut r = Noise::new(32);
     for i in 0..cap {
-        want.grad_accum[i] = 1e-3 * uniform(&mut r);
+        want.grad_accum[i] = 1e-3 * (r.uniform(0.0, 1.0) + HALF_STEP);
         want.denom[i] = (r.next_u32() % 4) as f32;
         want.max_radii[i] = (r.next_u32() % 9) as f32;
     }

@@ -11,15 +11,14 @@ use dispflow_vk::reference::gflow as twin;
 use dispflow_vk::testing::{self, Noise};
 use dispflow_vk::vk::Recorder;
 
-fn uniform(r: &mut Noise) -> f64 {
-    r.next_u32() as f64 / 4_294_967_296.0
-}
-
 /// A splat record with mean `mu`, a random 2D covariance (σ in [0.7, 6] px, any angle) plus
 /// the rasteriser's 0.3 dilation, as its conic, radius 3.
 fn record(r: &mut Noise, mu: [f64; 2]) -> [[f32; 4]; 3] {
-    let (s1, s2) = (0.7 + 5.3 * uniform(r), 0.7 + 5.3 * uniform(r));
-    let th = std::f64::consts::PI * uniform(r);
+    let (s1, s2) = (
+        0.7 + 5.3 * r.uniform(0.0f64, 1.0),
+        0.7 + 5.3 * r.uniform(0.0f64, 1.0),
+    );
+    let th = std::f64::consts::PI * r.uniform(0.0f64, 1.0);
     let (c, s) = (th.cos(), th.sin());
     let (a, b, d) = (
         c * c * s1 * s1 + s * s * s2 * s2 + 0.3,
@@ -40,10 +39,10 @@ fn scene(n: usize, seed: u64, extremes: bool) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) 
     let mut r = Noise::new(seed);
     let (mut s1, mut s2) = (Vec::new(), Vec::new());
     for i in 0..n {
-        let mu = [64.0 * uniform(&mut r), 48.0 * uniform(&mut r)];
+        let mu = [64.0 * r.uniform(0.0f64, 1.0), 48.0 * r.uniform(0.0f64, 1.0)];
         let mu2 = [
-            mu[0] + 6.0 * uniform(&mut r) - 3.0,
-            mu[1] + 6.0 * uniform(&mut r) - 3.0,
+            mu[0] + 6.0 * r.uniform(0.0f64, 1.0) - 3.0,
+            mu[1] + 6.0 * r.uniform(0.0f64, 1.0) - 3.0,
         ];
         let (mut a, mut b) = (record(&mut r, mu), record(&mut r, mu2));
         if extremes {
@@ -69,7 +68,7 @@ fn scene(n: usize, seed: u64, extremes: bool) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) 
 
 fn rand_vec(r: &mut Noise, n: usize, scale: f64) -> Vec<f32> {
     (0..n)
-        .map(|_| ((uniform(r) - 0.5) * 2.0 * scale) as f32)
+        .map(|_| ((r.uniform(0.0f64, 1.0) - 0.5) * 2.0 * scale) as f32)
         .collect()
 }
 
@@ -174,7 +173,7 @@ fn twin_backward_matches_finite_differences() {
     let (s1, s2) = scene(n, 5, false);
     let (mut w1, mut w2) = (twin::widen(&s1), twin::widen(&s2));
     let mut r = Noise::new(6);
-    let d: Vec<f64> = (0..6 * n).map(|_| uniform(&mut r) - 0.5).collect();
+    let d: Vec<f64> = (0..6 * n).map(|_| r.uniform(0.0f64, 1.0) - 0.5).collect();
     let (g1, g2) = twin::features_bwd(&w1, &w2, &d);
     // (record, row, column) of each differentiated input: μ (row 0, x/y), conic (row 1, a/b/c).
     let slots = [(0, 0), (0, 1), (1, 0), (1, 1), (1, 2)];
@@ -268,7 +267,7 @@ fn l1_matches_twin_and_finite_differences() {
         .chunks(2)
         .map(|c| [c[0], c[1]])
         .collect();
-    let conf: Vec<f32> = (0..px).map(|_| uniform(&mut r) as f32).collect();
+    let conf: Vec<f32> = (0..px).map(|_| r.uniform(0.0f64, 1.0) as f32).collect();
     let fb = gpu.buffer_from("feat", &feat).unwrap();
     let sb = gpu.buffer_from("scene", &scene).unwrap();
     let cb = gpu.buffer_from("conf", &conf).unwrap();

@@ -16,10 +16,6 @@ use raster_common::{camera, Scene, Uploaded};
 
 mod raster_common;
 
-fn uniform(r: &mut Noise) -> f32 {
-    r.next_u32() as f32 / 4_294_967_296.0
-}
-
 /// The GPU's camera_flow of the inputs.
 fn gpu_camera_flow(
     gpu: &TestGpu,
@@ -61,11 +57,18 @@ fn camera_flow_matches_twin_with_extremes() {
     let b = moved(a, [0.2, -0.1, -3.0], 0.05);
     let mut r = Noise::new(3);
     let mut flow: Vec<[f32; 2]> = (0..px)
-        .map(|_| [40.0 * uniform(&mut r) - 20.0, 40.0 * uniform(&mut r) - 20.0])
+        .map(|_| {
+            [
+                40.0 * r.uniform(0.0f32, 1.0) - 20.0,
+                40.0 * r.uniform(0.0f32, 1.0) - 20.0,
+            ]
+        })
         .collect();
-    let mut rgba: Vec<[f32; 4]> = (0..px).map(|_| [0.5, 0.5, 0.5, uniform(&mut r)]).collect();
+    let mut rgba: Vec<[f32; 4]> = (0..px)
+        .map(|_| [0.5, 0.5, 0.5, r.uniform(0.0f32, 1.0)])
+        .collect();
     let mut depth: Vec<f32> = (0..px)
-        .map(|p| (0.5 + 9.5 * uniform(&mut r)) * rgba[p][3])
+        .map(|p| (0.5 + 9.5 * r.uniform(0.0f32, 1.0)) * rgba[p][3])
         .collect();
     flow[1] = [f32::NAN, 0.0];
     flow[2] = [0.0, f32::INFINITY];
@@ -140,13 +143,17 @@ fn wall(seed: u64) -> Scene {
         ..Default::default()
     };
     for _ in 0..4000 {
-        let z = 3.5 + uniform(&mut r);
+        let z = 3.5 + r.uniform(0.0f32, 1.0);
         let (x, y) = (
-            1.6 * (uniform(&mut r) - 0.5) * z,
-            1.3 * (uniform(&mut r) - 0.5) * z,
+            1.6 * (r.uniform(0.0f32, 1.0) - 0.5) * z,
+            1.3 * (r.uniform(0.0f32, 1.0) - 0.5) * z,
         );
-        let sc = 0.04 + 0.08 * uniform(&mut r);
-        let rgb = [uniform(&mut r), uniform(&mut r), uniform(&mut r)];
+        let sc = 0.04 + 0.08 * r.uniform(0.0f32, 1.0);
+        let rgb = [
+            r.uniform(0.0f32, 1.0),
+            r.uniform(0.0f32, 1.0),
+            r.uniform(0.0f32, 1.0),
+        ];
         s.push([x, y, z], [sc, sc, sc], [1.0, 0.0, 0.0, 0.0], 3.0, rgb);
     }
     s

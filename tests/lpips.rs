@@ -7,44 +7,18 @@ use std::path::{Path, PathBuf};
 
 use dispflow_vk::kernels::lpips::{Lpips, LpipsConvParams, LpipsWeights, Plan, ALEXNET, MIN_SIDE};
 use dispflow_vk::reference::lpips as twin;
-use dispflow_vk::testing::{self, Noise};
+use dispflow_vk::testing::{self, assert_close, Noise, Tol};
 use dispflow_vk::train::score::lpips::{
     load_weights, parse_weights, random_weights, to_safetensors, LpipsScorer,
 };
 use dispflow_vk::vk::{Gpu, Recorder};
 
-fn uniform(seed: u64, n: usize, lo: f32, hi: f32) -> Vec<f32> {
-    let mut r = Noise::new(seed);
-    (0..n)
-        .map(|_| lo + (hi - lo) * (r.next_u32() >> 8) as f32 / 16_777_216.0)
-        .collect()
-}
-
 fn image(seed: u64, n: usize) -> Vec<[f32; 4]> {
-    uniform(seed, 4 * n, 0.0, 1.0)
+    Noise::new(seed)
+        .uniforms(4 * n, 0.0, 1.0)
         .chunks_exact(4)
         .map(|c| [c[0], c[1], c[2], c[3]])
         .collect()
-}
-
-/// max |got − want| ≤ abs + rel · max |want| (one scale per tensor: features are summed over
-/// thousands of products, so their f32 error follows the tensor's magnitude, not each value's).
-fn assert_close(what: &str, got: &[f32], want: &[f64], abs: f64, rel: f64) {
-    assert_eq!(got.len(), want.len(), "{what}: length");
-    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let (mut worst, mut at) = (0.0f64, 0);
-    for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        let e = (*g as f64 - w).abs();
-        if e > worst || e.is_nan() {
-            (worst, at) = (e, i);
-        }
-    }
-    assert!(
-        worst <= abs + rel * scale,
-        "{what}: |gpu − twin| = {worst:.3e} at {at} (gpu {}, twin {}), scale {scale:.3e}",
-        got[at],
-        want[at]
-    );
 }
 
 fn to_f64(v: &[f32]) -> Vec<f64> {
@@ -90,7 +64,15 @@ fn every_stage_matches_twin_on_identical_inputs() {
         let p = bufs.plan;
         let input: Vec<f32> = gpu.read(bufs.input()).unwrap();
         let want = twin::lpips_input(&a, &b, w as usize, h as usize);
-        assert_close("lpips_input", &input, &want, 1e-6, 1e-6);
+        assert_close(
+            "lpips_input",
+            &input,
+            &want,
+            Tol::Normwise {
+                abs: 1e-6,
+                rel: 1e-6,
+            },
+        );
         let mut src = input;
         let (mut sw, mut sh) = (w as usize, h as usize);
         let mut pool_j = 0;
@@ -99,7 +81,12 @@ fn every_stage_matches_twin_on_identical_inputs() {
                 let got: Vec<f32> = gpu.read(bufs.pooled(pool_j)).unwrap();
                 let want = twin::max_pool(&to_f64(&src), 2 * s.cin as usize, sw, sh);
                 // A max picks one of its inputs: exact.
-                assert_close(&format!("max_pool {pool_j}"), &got, &want, 0.0, 0.0);
+                assert_close(
+                    &format!("max_pool {pool_j}"),
+                    &got,
+                    &want,
+                    Tol::Normwise { abs: 0.0, rel: 0.0 },
+                );
                 src = got;
                 pool_j += 1;
             }
@@ -122,7 +109,15 @@ fn every_stage_matches_twin_on_identical_inputs() {
                 "conv{}: all features dead",
                 i + 1
             );
-            assert_close(&format!("{w}×{h} conv{}", i + 1), &got, &want, 1e-6, 2e-5);
+            assert_close(
+                &format!("{w}×{h} conv{}", i + 1),
+                &got,
+                &want,
+                Tol::Normwise {
+                    abs: 1e-6,
+                    rel: 2e-5,
+                },
+            );
             src = got;
             (sw, sh) = (ow as usize, oh as usize);
         }
@@ -173,9 +168,9 @@ fn conv_matches_twin_at_other_shapes() {
             pad,
             pool_before: false,
         };
-        let src = uniform(10 + n as u64, (2 * cin * in_w * in_h) as usize, -1.0, 1.0);
-        let wt = uniform(20 + n as u64, (cout * cin * k * k) as usize, -0.5, 0.5);
-        let bias = uniform(30 + n as u64, cout as usize, -0.2, 0.2);
+        let src = Noise::new(10 + n as u64).uniforms((2 * cin * in_w * in_h) as usize, -1.0, 1.0);
+        let wt = Noise::new(20 + n as u64).uniforms((cout * cin * k * k) as usize, -0.5, 0.5);
+        let bias = Noise::new(30 + n as u64).uniforms(cout as usize, -0.2, 0.2);
         let packed: Vec<f32> = [vec![9.0; 3], wt.clone(), bias.clone()].concat();
         let (sb, wb) = (
             gpu.buffer_from("src", &src).unwrap(),
@@ -216,7 +211,15 @@ fn conv_matches_twin_at_other_shapes() {
             out_w as usize,
             out_h as usize,
         );
-        assert_close(&format!("conv case {n}"), &got, &want, 1e-6, 1e-5);
+        assert_close(
+            &format!("conv case {n}"),
+            &got,
+            &want,
+            Tol::Normwise {
+                abs: 1e-6,
+                rel: 1e-5,
+            },
+        );
     }
 }
 

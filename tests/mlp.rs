@@ -22,12 +22,8 @@ use dispflow_vk::kernels::mlp_fused::{MlpFused, Precision};
 use dispflow_vk::kernels::mlp_rows::{DeviceShape, MlpKernels};
 use dispflow_vk::model::deform::{MlpConfig, MlpLayout, TimeEncoding};
 use dispflow_vk::reference::mlp::{self as twin, Activations, Times};
-use dispflow_vk::testing::{self, Noise};
+use dispflow_vk::testing::{self, assert_close, Noise, Tol};
 use dispflow_vk::vk::{Buffer, Gpu, Recorder};
-
-fn unif(noise: &mut Noise, lo: f32, hi: f32) -> f32 {
-    lo + (hi - lo) * (noise.next_u32() as f32 / u32::MAX as f32)
-}
 
 fn small(time_net: bool) -> MlpConfig {
     MlpConfig {
@@ -62,16 +58,16 @@ impl Case {
     fn new(cfg: MlpConfig, n: usize, seed: u64, pos: f32, per_gaussian: bool) -> Case {
         let lay = MlpLayout::new(&cfg).unwrap();
         let mut noise = Noise::new(seed);
-        let xyz = (0..3 * n).map(|_| unif(&mut noise, -pos, pos)).collect();
-        let times = per_gaussian.then(|| (0..n).map(|_| unif(&mut noise, 0.0, 1.0)).collect());
-        let d_out = (0..10 * n).map(|_| unif(&mut noise, -1.0, 1.0)).collect();
+        let xyz = (0..3 * n).map(|_| noise.uniform(-pos, pos)).collect();
+        let times = per_gaussian.then(|| (0..n).map(|_| noise.uniform(0.0, 1.0)).collect());
+        let d_out = (0..10 * n).map(|_| noise.uniform(-1.0, 1.0)).collect();
         Case {
             params: lay.init_params(seed),
             lay,
             n,
             xyz,
             times,
-            t: unif(&mut noise, 0.0, 1.0),
+            t: noise.uniform(0.0, 1.0),
             d_out,
         }
     }
@@ -156,34 +152,6 @@ fn read_acts(gpu: &Gpu, mlp: &Mlp, b: &MlpBuffers, n: usize) -> Activations {
     )
 }
 
-/// `max |got − want| ≤ rel · max |want| + abs`; returns the normwise error.
-fn assert_close(what: &str, got: &[f32], want: &[f64], rel: f64, abs: f64) -> f64 {
-    assert_eq!(got.len(), want.len(), "{what}: length");
-    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let mut worst = (0.0f64, 0usize);
-    for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        let e = (*g as f64 - w).abs();
-        assert!(g.is_finite(), "{what}[{i}] = {g} is not finite");
-        if e > worst.0 {
-            worst = (e, i);
-        }
-    }
-    let tol = rel * scale + abs;
-    assert!(
-        worst.0 <= tol,
-        "{what}: |gpu − twin| = {:.3e} at {} (gpu {}, twin {}) exceeds {tol:.3e} (scale {scale:.3e})",
-        worst.0,
-        worst.1,
-        got[worst.1],
-        want[worst.1]
-    );
-    if scale > 0.0 {
-        worst.0 / scale
-    } else {
-        0.0
-    }
-}
-
 /// Forward (and backward) on the layer-wise GPU path vs the twin. Returns the normwise errors.
 /// Both kernel paths (tiled GEMMs and the register path) against the twin. The re-runs at other
 /// lavapipe vector widths take the register path only: neither path uses subgroup operations,
@@ -248,7 +216,16 @@ fn check_layerwise_bound(
     let want = twin::forward_f64(&c.lay, &p64, &c.xyz, c.twin_times());
     let got: Vec<f32> = gpu.read(io.out.elems::<f32>(0, c.n as u64 * 10)).unwrap();
     let label = format!("{kernels:?} {:?} n={} fwd", c.lay.cfg, c.n);
-    let ef = assert_close(&label, &got, &want.out, 1e-5, 1e-7);
+    let ef = assert_close(
+        &label,
+        &got,
+        &want.out,
+        Tol::Normwise {
+            abs: 1e-7,
+            rel: 1e-5,
+        },
+    )
+    .normwise();
     // The stored encoding matches the twin's: raw x exactly, sin/cos within 1e-5 absolute.
     // With the phase-exact reduction the error is the device's sin/cos on [−π, π] alone: it
     // does not grow with the frequency or with |x| (lavapipe: ≤ 2.3e-6 at every frequency, also
@@ -278,20 +255,14 @@ fn check_layerwise_bound(
                 "{kernels:?} {:?} n={} grad of linear {li} ({:?})",
                 c.lay.cfg, c.n, l.role
             );
-            eb = eb.max(assert_close(
-                &format!("{what} W"),
-                &got[w.clone()],
-                &g[w],
-                1e-5,
-                1e-8,
-            ));
-            eb = eb.max(assert_close(
-                &format!("{what} b"),
-                &got[bb.clone()],
-                &g[bb],
-                1e-5,
-                1e-8,
-            ));
+            for (part, r) in [("W", w), ("b", bb)] {
+                let tol = Tol::Normwise {
+                    abs: 1e-8,
+                    rel: 1e-5,
+                };
+                let c = assert_close(&format!("{what} {part}"), &got[r.clone()], &g[r], tol);
+                eb = eb.max(c.normwise());
+            }
         }
     }
     (ef, eb)
@@ -430,7 +401,15 @@ fn accumulates_and_zero_rows(kern: MlpKernels) {
             .filter(|i| *i < l.w_off + l.fan_in * l.fan_out || *i >= l.b_off)
             .map(|i| (got[i], g[i]))
             .unzip();
-        assert_close("accumulated grads (2×)", &gg, &ww, 1e-5, 1e-8);
+        assert_close(
+            "accumulated grads (2×)",
+            &gg,
+            &ww,
+            Tol::Normwise {
+                abs: 1e-8,
+                rel: 1e-5,
+            },
+        );
     }
     // Zero Gaussians: nothing dispatched over rows, gradients written as exact zeros.
     let mut rec = Recorder::new(&gpu).unwrap();
@@ -539,7 +518,16 @@ fn check_fused(
         );
         rec.finish().unwrap();
         let got: Vec<f32> = gpu.read(io.out.elems::<f32>(0, c.n as u64 * 10)).unwrap();
-        e32 = assert_close(&label, &got, &want, 1e-5, 1e-7);
+        e32 = assert_close(
+            &label,
+            &got,
+            &want,
+            Tol::Normwise {
+                abs: 1e-7,
+                rel: 1e-5,
+            },
+        )
+        .normwise();
     }
     if !(gpu.info.shader_float16 && gpu.info.storage_16bit) {
         dispflow_vk::testing::skip(
@@ -571,14 +559,26 @@ fn check_fused(
     let want16 = twin::forward_f16(&c.lay, &c.params, &c.xyz, c.twin_times());
     Some(FusedErr {
         f32: e32,
-        f16_vs_f64: assert_close(&format!("{label} → fp16"), &got, &want, f16_rel, 0.0),
+        f16_vs_f64: assert_close(
+            &format!("{label} → fp16"),
+            &got,
+            &want,
+            Tol::Normwise {
+                abs: 0.0,
+                rel: f16_rel,
+            },
+        )
+        .normwise(),
         f16_vs_f16: assert_close(
             &format!("{label} → fp16 vs fp16 twin"),
             &got,
             &want16,
-            f16_twin_rel,
-            0.0,
-        ),
+            Tol::Normwise {
+                abs: 0.0,
+                rel: f16_twin_rel,
+            },
+        )
+        .normwise(),
     })
 }
 
@@ -738,7 +738,7 @@ fn fp16_saturates_inputs_and_weights_beyond_65504_like_the_twin() {
         c.xyz[1] = -1e5;
         let mut noise = Noise::new(90 + k as u64);
         let big = |noise: &mut Noise| {
-            let m = unif(noise, 1e5, 1e6);
+            let m = noise.uniform(1e5, 1e6);
             if noise.next_u32() % 2 == 0 {
                 m
             } else {

@@ -5,10 +5,6 @@ use dispflow_vk::model::deform::{MlpConfig, MlpLayout, TimeEncoding};
 use dispflow_vk::reference::mlp::{self, Times};
 use dispflow_vk::testing::Noise;
 
-fn unif(noise: &mut Noise, lo: f32, hi: f32) -> f32 {
-    lo + (hi - lo) * (noise.next_u32() as f32 / u32::MAX as f32)
-}
-
 /// Loss `Σ d_out · out` for parameters `p`.
 fn loss(lay: &MlpLayout, p: &[f64], xyz: &[f32], t: Times<'_>, d_out: &[f32]) -> f64 {
     let a = mlp::forward_f64(lay, p, xyz, t);
@@ -22,9 +18,9 @@ fn check_fd(cfg: MlpConfig, n: usize, seed: u64, idx: Option<Vec<usize>>) {
     let lay = MlpLayout::new(&cfg).unwrap();
     let p: Vec<f64> = lay.init_params(seed).iter().map(|&v| v as f64).collect();
     let mut noise = Noise::new(seed);
-    let xyz: Vec<f32> = (0..3 * n).map(|_| unif(&mut noise, -1.5, 1.5)).collect();
-    let ts: Vec<f32> = (0..n).map(|_| unif(&mut noise, 0.0, 1.0)).collect();
-    let d_out: Vec<f32> = (0..10 * n).map(|_| unif(&mut noise, -1.0, 1.0)).collect();
+    let xyz: Vec<f32> = (0..3 * n).map(|_| noise.uniform(-1.5, 1.5)).collect();
+    let ts: Vec<f32> = (0..n).map(|_| noise.uniform(0.0, 1.0)).collect();
+    let d_out: Vec<f32> = (0..10 * n).map(|_| noise.uniform(-1.0, 1.0)).collect();
     let t = Times::PerGaussian(&ts);
     let a = mlp::forward_f64(&lay, &p, &xyz, t);
     let g = mlp::backward(&lay, &p, &a, &d_out);

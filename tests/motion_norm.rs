@@ -8,7 +8,7 @@ use dispflow_vk::kernels::motion::{
 use dispflow_vk::reference::motion::{
     magnitudes, normalize_backward, normalize_f64, normalize_magnitudes, Normalized,
 };
-use dispflow_vk::testing::{self, Noise, TestGpu};
+use dispflow_vk::testing::{self, max_abs, Noise, TestGpu};
 use dispflow_vk::vk::Recorder;
 
 fn unit(r: &mut Noise) -> f64 {
@@ -135,10 +135,6 @@ fn run_gpu(
         flag: b.flag(gpu).unwrap(),
         stats: b.read_stats(gpu).unwrap(),
     }
-}
-
-fn max_abs(x: &[f64]) -> f64 {
-    x.iter().fold(0.0f64, |a, b| a.max(b.abs()))
 }
 
 /// Compares one GPU run with the twin evaluated on the GPU's own magnitudes (one stage at a

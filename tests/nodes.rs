@@ -7,14 +7,8 @@
 use dispflow_vk::kernels::nodes::{key_bits, BlendInputs, GatherShape, NodeKernels, NO_NODE};
 use dispflow_vk::kernels::radix_sort::passes;
 use dispflow_vk::reference::nodes::{nodes_gather, nodes_knn, nodes_lbs, nodes_lbs_bwd, Slot};
-use dispflow_vk::testing::{self, Noise};
+use dispflow_vk::testing::{self, assert_close, Noise, Tol};
 use dispflow_vk::vk::{Buffer, Recorder};
-
-fn uniform(r: &mut Noise, n: usize, lo: f32, hi: f32) -> Vec<f32> {
-    (0..n)
-        .map(|_| lo + (hi - lo) * (r.next_u32() as f32 / 4_294_967_296.0))
-        .collect()
-}
 
 fn rows3(v: &[f32]) -> Vec<[f32; 3]> {
     v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
@@ -34,15 +28,15 @@ struct Problem {
 
 fn problem(seed: u64, n: usize, m: usize) -> Problem {
     let mut r = Noise::new(seed);
-    let means = uniform(&mut r, 3 * n, -1.0, 1.0);
-    let quats = uniform(&mut r, 4 * n, -1.0, 1.0);
-    let mut nodes = uniform(&mut r, 3 * m, -1.0, 1.0);
-    nodes.extend(uniform(&mut r, m, -1.3, -0.5));
+    let means = r.uniforms(3 * n, -1.0, 1.0);
+    let quats = r.uniforms(4 * n, -1.0, 1.0);
+    let mut nodes = r.uniforms(3 * m, -1.0, 1.0);
+    nodes.extend(r.uniforms(m, -1.3, -0.5));
     let mut node_out = Vec::new();
     for _ in 0..m {
-        node_out.extend(uniform(&mut r, 3, -0.2, 0.2)); // T
-        node_out.extend(uniform(&mut r, 4, -0.3, 0.3)); // dq
-        node_out.extend(uniform(&mut r, 3, -0.1, 0.1)); // ds
+        node_out.extend(r.uniforms(3, -0.2, 0.2)); // T
+        node_out.extend(r.uniforms(4, -0.3, 0.3)); // dq
+        node_out.extend(r.uniforms(3, -0.1, 0.1)); // ds
     }
     Problem {
         means,
@@ -82,13 +76,6 @@ impl Problem {
     fn q(&self, i: usize) -> [f64; 4] {
         std::array::from_fn(|a| self.quats[4 * i + a] as f64)
     }
-}
-
-fn close(what: &str, got: f32, want: f64, tol: f64) {
-    assert!(
-        got.is_finite() && (got as f64 - want).abs() <= tol * (1.0 + want.abs()),
-        "{what}: gpu {got} vs twin {want}"
-    );
 }
 
 struct Gpu3 {
@@ -181,6 +168,8 @@ fn knn_matches_brute_force_with_ties_few_nodes_and_a_split() {
 /// Forward, backward and gather on the GPU against the twin; `split`: through the dynamic
 /// rows (every third Gaussian static).
 fn blend_checked(p: &Problem, k: u32, split: bool, tol: f64, gather: GatherShape) {
+    // |gpu − twin| ≤ tol·(1 + |twin|)
+    let tol = Tol::Elementwise { abs: tol, rel: tol };
     let g = Gpu3::with_gather(gather);
     let n = p.n();
     let row_of: Vec<u32> = (0..n as u32)
@@ -192,10 +181,10 @@ fn blend_checked(p: &Problem, k: u32, split: bool, tol: f64, gather: GatherShape
         .collect();
     let rows = if split { idx.len() } else { n };
     let mut r = Noise::new(9);
-    let d_out = uniform(&mut r, 10 * rows, -1.0, 1.0);
-    let base_gm = uniform(&mut r, 3 * n, -1.0, 1.0);
-    let base_gq = uniform(&mut r, 4 * n, -1.0, 1.0);
-    let base_gn = uniform(&mut r, 4 * p.m, -1.0, 1.0);
+    let d_out = r.uniforms(10 * rows, -1.0, 1.0);
+    let base_gm = r.uniforms(3 * n, -1.0, 1.0);
+    let base_gq = r.uniforms(4 * n, -1.0, 1.0);
+    let base_gn = r.uniforms(4 * p.m, -1.0, 1.0);
 
     let kk = &g.k;
     let b = kk.buffers(&g.gpu, n as u32, p.m as u32, k).unwrap();
@@ -248,25 +237,30 @@ fn blend_checked(p: &Problem, k: u32, split: bool, tol: f64, gather: GatherShape
         let slots = p.slots(&knn[ku * i..ku * i + ku]);
         let want = nodes_lbs(p.mu(i), p.q(i), &slots);
         for c in 0..10 {
-            close(&format!("D[{i}][{c}]"), got_out[10 * row + c], want[c], tol);
+            assert_close(
+                &format!("D[{i}][{c}]"),
+                &[got_out[10 * row + c]],
+                &[want[c]],
+                tol,
+            );
         }
         let up: [f64; 10] = std::array::from_fn(|c| d_out[10 * row + c] as f64);
         let (gmu, gqq, cs) = nodes_lbs_bwd(p.mu(i), p.q(i), &slots, up);
         for a in 0..3 {
             let w = base_gm[3 * i + a] as f64 + gmu[a];
-            close(
+            assert_close(
                 &format!("dL/dmu[{i}][{a}] (added)"),
-                got_gm[3 * i + a],
-                w,
+                &[got_gm[3 * i + a]],
+                &[w],
                 tol,
             );
         }
         for a in 0..4 {
             let w = base_gq[4 * i + a] as f64 + gqq[a];
-            close(
+            assert_close(
                 &format!("dL/dq[{i}][{a}] (added)"),
-                got_gq[4 * i + a],
-                w,
+                &[got_gq[4 * i + a]],
+                &[w],
                 tol,
             );
         }
@@ -274,7 +268,12 @@ fn blend_checked(p: &Problem, k: u32, split: bool, tol: f64, gather: GatherShape
             all_contrib[ku * i + s] = *c;
             for (a, &want) in c.iter().enumerate() {
                 let at = (ku * i + s) * 14 + a;
-                close(&format!("contrib[{i}][{s}][{a}]"), contrib[at], want, tol);
+                assert_close(
+                    &format!("contrib[{i}][{s}][{a}]"),
+                    &[contrib[at]],
+                    &[want],
+                    tol,
+                );
             }
         }
     }
@@ -287,27 +286,27 @@ fn blend_checked(p: &Problem, k: u32, split: bool, tol: f64, gather: GatherShape
     let (dn, gnodes) = nodes_gather(&knn, &all_contrib, p.m);
     for j in 0..p.m {
         for c in 0..10 {
-            close(
+            assert_close(
                 &format!("dL/dnode_out[{j}][{c}]"),
-                got_dn[10 * j + c],
-                dn[j][c],
+                &[got_dn[10 * j + c]],
+                &[dn[j][c]],
                 tol,
             );
         }
         for a in 0..3 {
             let w = base_gn[3 * j + a] as f64 + gnodes[j][a];
-            close(
+            assert_close(
                 &format!("dL/dp[{j}][{a}] (added)"),
-                got_gn[3 * j + a],
-                w,
+                &[got_gn[3 * j + a]],
+                &[w],
                 tol,
             );
         }
         let w = base_gn[3 * p.m + j] as f64 + gnodes[j][3];
-        close(
+        assert_close(
             &format!("dL/drho[{j}] (added)"),
-            got_gn[3 * p.m + j],
-            w,
+            &[got_gn[3 * p.m + j]],
+            &[w],
             tol,
         );
     }

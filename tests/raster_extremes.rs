@@ -6,7 +6,7 @@ mod raster_common;
 
 use dispflow_vk::kernels::raster::{Camera, Rasterizer, RenderOpts, G2D_STRIDE};
 use dispflow_vk::reference::raster as twin;
-use dispflow_vk::testing;
+use dispflow_vk::testing::{self, max_abs};
 use raster_common::*;
 
 const ID: [f32; 4] = [1.0, 0.0, 0.0, 0.0];
@@ -289,10 +289,6 @@ struct Measured {
     grad_each: f64,
 }
 
-fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
-}
-
 /// (normwise, per-Gaussian) error of `got` against `want`, both `[N][per]`; `own[i]` replaces
 /// Gaussian i's own max |twin| when given. A Gaussian whose reference is exactly 0 must get
 /// exact zeros on the GPU.
@@ -374,7 +370,7 @@ fn twin_check(label: &str, scene: &Scene, cam: &Camera, opts: &RenderOpts, tol: 
             m.proj = m.proj.max((a[3] - proj.opacity[i]).abs() as f64);
             let wc = proj.conic[i].map(f64::from);
             let e = (0..3).fold(0.0f64, |e, d| e.max((c[d] as f64 - wc[d]).abs()));
-            m.proj = m.proj.max(e / max_abs(&wc));
+            m.proj = m.proj.max(e / max_abs(wc));
             for (g, w) in col[..3].iter().zip(proj.color[i]) {
                 m.proj = m.proj.max((g - w).abs() as f64);
             }
@@ -446,7 +442,7 @@ fn grad_check(
             let ls: Vec<f64> = (0..3)
                 .map(|k| scene.scales[i][k] as f64 * pg.scales[i][k])
                 .collect();
-            max_abs(&pg.quats[i]).max(max_abs(&ls))
+            max_abs(pg.quats[i]).max(max_abs(&ls))
         })
         .collect();
     let sh = scene.sh_coeffs as usize * 3;

@@ -7,7 +7,7 @@ use dispflow_vk::kernels::raster::{
     join_sh, split_sh, BlendBwdVariant, BlendFwdVariant, Camera, DeviceShape, OutputGrads,
     RasterSize, Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
 };
-use dispflow_vk::testing;
+use dispflow_vk::testing::{self, assert_close, Tol};
 use dispflow_vk::vk::Recorder;
 
 fn data_dir() -> Option<PathBuf> {
@@ -59,26 +59,6 @@ fn camera() -> Camera {
         height: 82,
         near: 0.01,
     }
-}
-
-/// |got − want| <= abs + rel·|want| elementwise, with a message naming the worst element.
-fn assert_close(what: &str, got: &[f32], want: &[f32], abs: f32, rel: f32) {
-    assert_eq!(got.len(), want.len(), "{what}: length");
-    let mut worst = (0usize, 0.0f32);
-    for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        let excess = (g - w).abs() - (abs + rel * w.abs());
-        assert!(g.is_finite(), "{what}[{i}] = {g} is not finite");
-        if excess > worst.1 {
-            worst = (i, excess);
-        }
-    }
-    let i = worst.0;
-    assert!(
-        worst.1 <= 0.0,
-        "{what}[{i}]: got {}, want {} (abs {abs}, rel {rel})",
-        got[i],
-        want[i]
-    );
 }
 
 fn run(name: &str) {
@@ -144,11 +124,43 @@ fn run(name: &str) {
         let conics: Vec<f32> = (0..n as usize)
             .flat_map(|i| [splats[12 * i + 4], splats[12 * i + 5], splats[12 * i + 6]])
             .collect();
-        assert_close(&fw("xys"), &xys, c.get("xys"), 1e-4, 1e-5);
-        assert_close(&fw("depths"), &depths, c.get("depths"), 1e-5, 1e-6);
-        assert_close(&fw("conics"), &conics, c.get("conics"), 1e-6, 1e-4);
+        assert_close(
+            &fw("xys"),
+            &xys,
+            c.get("xys"),
+            Tol::Elementwise {
+                abs: 1e-4,
+                rel: 1e-5,
+            },
+        );
+        assert_close(
+            &fw("depths"),
+            &depths,
+            c.get("depths"),
+            Tol::Elementwise {
+                abs: 1e-5,
+                rel: 1e-6,
+            },
+        );
+        assert_close(
+            &fw("conics"),
+            &conics,
+            c.get("conics"),
+            Tol::Elementwise {
+                abs: 1e-6,
+                rel: 1e-4,
+            },
+        );
         let img: Vec<f32> = gpu.read(b.out_rgba.all()).unwrap();
-        assert_close(&fw("out_img"), &img, c.get("out_img"), 2e-5, 1e-4);
+        assert_close(
+            &fw("out_img"),
+            &img,
+            c.get("out_img"),
+            Tol::Elementwise {
+                abs: 2e-5,
+                rel: 1e-4,
+            },
+        );
 
         let d_rgba = gpu.buffer_from("v_out_img", c.get("v_out_img")).unwrap();
         let d_depth = gpu
@@ -186,8 +198,18 @@ fn run(name: &str) {
                 .collect();
             // Stored gradients carry ~4 significant digits (README): rel 2e-3, abs 1e-7.
             let (abs, rel) = (1e-7, 2e-3);
-            assert_close(&what("v_xy"), &v_xy, c.get("v_xy"), abs, rel);
-            assert_close(&what("v_conics"), &v_con, c.get("v_conics"), abs, rel);
+            assert_close(
+                &what("v_xy"),
+                &v_xy,
+                c.get("v_xy"),
+                Tol::Elementwise { abs, rel },
+            );
+            assert_close(
+                &what("v_conics"),
+                &v_con,
+                c.get("v_conics"),
+                Tol::Elementwise { abs, rel },
+            );
             let rd = |buf: &dispflow_vk::vk::Buffer, len: usize| -> Vec<f32> {
                 gpu.read::<f32>(buf.all()).unwrap()[..len].to_vec()
             };
@@ -196,8 +218,7 @@ fn run(name: &str) {
                 &what("v_means"),
                 &rd(&b.d_means, 3 * nn),
                 c.get("v_means"),
-                abs,
-                rel,
+                Tol::Elementwise { abs, rel },
             );
             // gsplat differentiates log-scales: ∂L/∂log s = s · ∂L/∂s.
             let v_log: Vec<f32> = rd(&b.d_scales, 3 * nn)
@@ -205,27 +226,29 @@ fn run(name: &str) {
                 .zip(&scales)
                 .map(|(g, s)| g * s)
                 .collect();
-            assert_close(&what("v_scales"), &v_log, c.get("v_scales"), abs, rel);
+            assert_close(
+                &what("v_scales"),
+                &v_log,
+                c.get("v_scales"),
+                Tol::Elementwise { abs, rel },
+            );
             assert_close(
                 &what("v_quats"),
                 &rd(&b.d_quats, 4 * nn),
                 c.get("v_quats"),
-                abs,
-                rel,
+                Tol::Elementwise { abs, rel },
             );
             assert_close(
                 &what("v_opacities"),
                 &rd(&b.d_opacity_logits, nn),
                 c.get("v_opacities"),
-                abs,
-                rel,
+                Tol::Elementwise { abs, rel },
             );
             assert_close(
                 &what("v_coeffs"),
                 &join_sh(&rd(&b.d_sh_dc, 3 * nn), &rd(&b.d_sh_rest, 45 * nn), 16),
                 c.get("v_coeffs"),
-                abs,
-                rel,
+                Tol::Elementwise { abs, rel },
             );
         }
     }

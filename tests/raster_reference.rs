@@ -10,6 +10,7 @@ use dispflow_vk::reference::raster::{
     ProjectGrads, Projected,
 };
 use dispflow_vk::reference::sh;
+use dispflow_vk::testing::{assert_close, Tol};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
@@ -177,28 +178,6 @@ fn assert_all_finite(what: &str, out: &BlendOut, bg: &BlendGrads, pg: &ProjectGr
     }
 }
 
-/// `|got − want| ≤ abs + rel·|want|` elementwise; reports the worst entry.
-fn assert_close(what: &str, got: &[f64], want: &[f64], rel: f64, abs: f64) {
-    assert_eq!(got.len(), want.len(), "{what}: length");
-    let mut worst = (0.0, 0usize);
-    for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        let excess = (g - w).abs() / (abs + rel * w.abs());
-        assert!(excess.is_finite(), "{what}[{i}]: got {g}, want {w}");
-        if excess > worst.0 {
-            worst = (excess, i);
-        }
-    }
-    let i = worst.1;
-    eprintln!("{what}: worst |diff|/tol = {:.3} at [{i}]", worst.0);
-    assert!(
-        worst.0 <= 1.0,
-        "{what}[{i}]: got {}, want {} (|diff| {:.3e} > {abs:e} + {rel:e}·|want|)",
-        got[i],
-        want[i],
-        (got[i] - want[i]).abs()
-    );
-}
-
 // ---------------------------------------------------------------------------------------------
 // 1. gsplat oracle
 
@@ -290,21 +269,33 @@ fn gsplat_case(name: &str) {
     // Projection: gsplat computes in f32, so agreement is to f32 rounding of the operations
     // (|xy| ≤ ~150 px: a few ulp ≈ 1e-5; conics go through a 2×2 inverse: rel 1e-5).
     let xys: Vec<f64> = proj.mean2d.iter().flatten().map(|&x| x as f64).collect();
-    assert_close(&format!("{name} xys"), &xys, &wide(get("xys")), 1e-6, 1e-4);
+    assert_close(
+        &format!("{name} xys"),
+        &xys,
+        &wide(get("xys")),
+        Tol::Elementwise {
+            abs: 1e-4,
+            rel: 1e-6,
+        },
+    );
     let conics: Vec<f64> = proj.conic.iter().flatten().map(|&x| x as f64).collect();
     assert_close(
         &format!("{name} conics"),
         &conics,
         &wide(get("conics")),
-        1e-5,
-        1e-7,
+        Tol::Elementwise {
+            abs: 1e-7,
+            rel: 1e-5,
+        },
     );
     assert_close(
         &format!("{name} depths"),
         &wide(&proj.depth),
         &wide(get("depths")),
-        1e-6,
-        1e-6,
+        Tol::Elementwise {
+            abs: 1e-6,
+            rel: 1e-6,
+        },
     );
 
     // Forward image: RGB + accumulated alpha, to ~1e-5 (README: an f64 re-implementation
@@ -319,8 +310,10 @@ fn gsplat_case(name: &str) {
         &format!("{name} out_img"),
         &img,
         &wide(get("out_img")),
-        0.0,
-        1e-5,
+        Tol::Elementwise {
+            abs: 1e-5,
+            rel: 0.0,
+        },
     );
 
     // Backward with v_out_img as the upstream gradient.
@@ -340,7 +333,12 @@ fn gsplat_case(name: &str) {
             big * 2 > want.len(),
             "{name} {key}: mostly tiny reference values"
         );
-        assert_close(&format!("{name} {what}"), &got, &want, rel, abs)
+        assert_close(
+            &format!("{name} {what}"),
+            &got,
+            &want,
+            Tol::Elementwise { abs, rel },
+        )
     };
     // gsplat's v_xy and v_conics use the same conventions as BlendGrads: d = mean2d − pixel
     // centre and σ = ½(a dx² + c dy²) + b dx dy, so they compare without conversion.
@@ -644,7 +642,12 @@ fn check_fd(s: &Scene, up_seed: u64) {
         }
         // FD error: rounding ≈ 1e-16·|L|/h plus truncation O(h²); both ≪ 1e-6·(1 + |L|).
         let abs = 1e-7 * (1.0 + l0.abs());
-        assert_close(&format!("FD {kind:?} seed {up_seed}"), &an, &fd, 1e-5, abs);
+        assert_close(
+            &format!("FD {kind:?} seed {up_seed}"),
+            &an,
+            &fd,
+            Tol::Elementwise { abs, rel: 1e-5 },
+        );
     }
     eprintln!("FD seed {up_seed}: {total} parameters, {skipped} skipped as straddling");
     assert!(
@@ -796,18 +799,44 @@ fn f32_wrappers_match_f64_path() {
     assert_eq!(out.n_contrib, out64.n_contrib);
     let rgb: Vec<f64> = out.rgb.iter().flatten().map(|&x| x as f64).collect();
     let rgb64: Vec<f64> = out64.rgb.iter().flatten().copied().collect();
-    assert_close("rgb f32 vs f64", &rgb, &rgb64, 1e-6, 1e-6);
+    assert_close(
+        "rgb f32 vs f64",
+        &rgb,
+        &rgb64,
+        Tol::Elementwise {
+            abs: 1e-6,
+            rel: 1e-6,
+        },
+    );
     let flat = |v: &[[f64; 3]]| v.iter().flatten().copied().collect::<Vec<_>>();
     let tol = |v: &[f64]| 1e-4 * v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     let m64 = flat(&pg64.means);
-    assert_close("means f32 vs f64", &flat(&pg.means), &m64, 1e-3, tol(&m64));
-    assert_close("sh f32 vs f64", &pg.sh, &pg64.sh, 1e-3, tol(&pg64.sh));
+    assert_close(
+        "means f32 vs f64",
+        &flat(&pg.means),
+        &m64,
+        Tol::Elementwise {
+            abs: tol(&m64),
+            rel: 1e-3,
+        },
+    );
+    assert_close(
+        "sh f32 vs f64",
+        &pg.sh,
+        &pg64.sh,
+        Tol::Elementwise {
+            abs: tol(&pg64.sh),
+            rel: 1e-3,
+        },
+    );
     assert_close(
         "op f32 vs f64",
         &bg.opacity,
         &bg64.opacity,
-        1e-3,
-        tol(&bg64.opacity),
+        Tol::Elementwise {
+            abs: tol(&bg64.opacity),
+            rel: 1e-3,
+        },
     );
 }
 
@@ -1087,13 +1116,29 @@ fn single_gaussian_peak_equals_opacity_times_colour() {
     let (s, v) = single(33, 0.0, [0.0; 3]);
     let (proj, out) = s.render();
     let conic = proj.conic[0].map(|x| x as f64);
-    assert_close("conic", &conic, &[1.0 / v, 0.0, 1.0 / v], 1e-6, 1e-7);
+    assert_close(
+        "conic",
+        &conic,
+        &[1.0 / v, 0.0, 1.0 / v],
+        Tol::Elementwise {
+            abs: 1e-7,
+            rel: 1e-6,
+        },
+    );
     assert_eq!(proj.opacity[0], 0.5);
     // 33×33, cx = 16.5: pixel (16, 16)'s centre is the mean exactly.
     let c = 16 * 33 + 16;
     let want = [0.2, 0.5, 0.8].map(|x| 0.5 * x);
     let got = out.rgb[c].map(|x| x as f64);
-    assert_close("peak", &got, &want, 0.0, 1e-6);
+    assert_close(
+        "peak",
+        &got,
+        &want,
+        Tol::Elementwise {
+            abs: 1e-6,
+            rel: 0.0,
+        },
+    );
     assert!((out.alpha[c] - 0.5).abs() < 1e-6);
     assert!((out.depth[c] - 2.0).abs() < 1e-6, "depth = w·z = 0.5·4");
     // One pixel to the right: dx = −1, σ = 0.5/v.
@@ -1110,8 +1155,10 @@ fn single_gaussian_peak_equals_opacity_times_colour() {
             "off-centre peak",
             &got,
             &[0.2, 0.5, 0.8].map(|x| a * x),
-            0.0,
-            1e-6,
+            Tol::Elementwise {
+                abs: 1e-6,
+                rel: 0.0,
+            },
         );
     }
 }
@@ -1132,8 +1179,10 @@ fn alpha_max_clamp_and_background() {
             "clamped peak",
             &out.rgb[c].map(|x| x as f64),
             &want,
-            0.0,
-            1e-6,
+            Tol::Elementwise {
+                abs: 1e-6,
+                rel: 0.0,
+            },
         );
         assert!((out.alpha[c] as f64 - a).abs() < 1e-6);
         // The clamp holds the gradient wrt opacity at that pixel at 0: only the clamped pixel
@@ -1173,8 +1222,10 @@ fn depth_order_ties_skip_and_stop() {
         "two layers",
         &out.rgb[c].map(|x| x as f64),
         &want,
-        0.0,
-        1e-6,
+        Tol::Elementwise {
+            abs: 1e-6,
+            rel: 0.0,
+        },
     );
     assert_eq!(out.n_contrib[c], 2);
 
@@ -1189,8 +1240,10 @@ fn depth_order_ties_skip_and_stop() {
         "tie by index",
         &out.rgb[c].map(|x| x as f64),
         &want,
-        0.0,
-        1e-6,
+        Tol::Elementwise {
+            abs: 1e-6,
+            rel: 0.0,
+        },
     );
 
     // α < 1/255 in front is skipped but counts in n_contrib's position.
@@ -1215,7 +1268,15 @@ fn depth_order_ties_skip_and_stop() {
     let want: Vec<f64> = (0..3)
         .map(|k| a * c_front[k] + (1.0 - a) * bg[k] as f64)
         .collect();
-    assert_close("stop", &out.rgb[c].map(|x| x as f64), &want, 0.0, 1e-6);
+    assert_close(
+        "stop",
+        &out.rgb[c].map(|x| x as f64),
+        &want,
+        Tol::Elementwise {
+            abs: 1e-6,
+            rel: 0.0,
+        },
+    );
 }
 
 #[test]

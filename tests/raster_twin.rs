@@ -17,32 +17,16 @@ use dispflow_vk::kernels::raster::{
     BlendBwdVariant, OutputGrads, RasterSize, Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
 };
 use dispflow_vk::reference::raster as twin;
-use dispflow_vk::testing::{self, Noise};
+use dispflow_vk::testing::{self, assert_close, Noise, Tol};
 use dispflow_vk::vk::Recorder;
 use raster_common::*;
 
-fn close_kind(what: &str, got: &[f32], want: &[f64]) {
-    assert_eq!(got.len(), want.len(), "{what}: length");
-    let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let tol = 2e-3 * scale + 1e-7;
-    for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!(g.is_finite(), "{what}[{i}] = {g}");
-        assert!(
-            (*g as f64 - w).abs() <= tol,
-            "{what}[{i}]: gpu {g}, twin {w} (tol {tol:.3e}, max |twin| {scale:.3e})"
-        );
-    }
-}
-
-fn close_abs(what: &str, got: &[f32], want: &[f32], abs: f32, rel: f32) {
-    assert_eq!(got.len(), want.len(), "{what}: length");
-    for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!(
-            (g - w).abs() <= abs + rel * w.abs(),
-            "{what}[{i}]: gpu {g}, twin {w}"
-        );
-    }
-}
+/// Gradients of one kind (all d mean2d, all d conic, …) against the twin's: one scale per
+/// kind, its largest |twin|.
+const KIND: Tol = Tol::Normwise {
+    abs: 1e-7,
+    rel: 2e-3,
+};
 
 fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
     let gpu = testing::gpu();
@@ -81,40 +65,50 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
                 continue;
             }
             visible += 1;
-            close_abs(
+            assert_close(
                 &format!("{ctx}: mean2d {i}"),
                 &a[..2],
                 &proj.mean2d[i],
-                1e-3,
-                1e-6,
+                Tol::Elementwise {
+                    abs: 1e-3,
+                    rel: 1e-6,
+                },
             );
-            close_abs(
+            assert_close(
                 &format!("{ctx}: depth {i}"),
                 &a[2..3],
                 &[proj.depth[i]],
-                0.0,
-                1e-6,
+                Tol::Elementwise {
+                    abs: 0.0,
+                    rel: 1e-6,
+                },
             );
-            close_abs(
+            assert_close(
                 &format!("{ctx}: opacity {i}"),
                 &a[3..4],
                 &[proj.opacity[i]],
-                1e-7,
-                1e-6,
+                Tol::Elementwise {
+                    abs: 1e-7,
+                    rel: 1e-6,
+                },
             );
-            close_abs(
+            assert_close(
                 &format!("{ctx}: conic {i}"),
                 &c[..3],
                 &proj.conic[i],
-                1e-7,
-                1e-4,
+                Tol::Elementwise {
+                    abs: 1e-7,
+                    rel: 1e-4,
+                },
             );
-            close_abs(
+            assert_close(
                 &format!("{ctx}: colour {i}"),
                 &col[..3],
                 &proj.color[i],
-                1e-6,
-                1e-5,
+                Tol::Elementwise {
+                    abs: 1e-6,
+                    rel: 1e-5,
+                },
             );
         }
         assert!(
@@ -133,28 +127,50 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
         let px = (w * h) as usize;
         let rgb: Vec<f32> = out.rgba.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
         let alpha: Vec<f32> = out.rgba.iter().map(|p| p[3]).collect();
-        close_abs(
+        assert_close(
             &format!("{ctx}: rgb"),
             &rgb,
             fwd.rgb.as_flattened(),
-            2e-5,
-            0.0,
+            Tol::Elementwise {
+                abs: 2e-5,
+                rel: 0.0,
+            },
         );
-        close_abs(&format!("{ctx}: alpha"), &alpha, &fwd.alpha, 2e-5, 0.0);
-        close_abs(&format!("{ctx}: depth"), &out.depth, &fwd.depth, 2e-5, 2e-5);
-        close_abs(
+        assert_close(
+            &format!("{ctx}: alpha"),
+            &alpha,
+            &fwd.alpha,
+            Tol::Elementwise {
+                abs: 2e-5,
+                rel: 0.0,
+            },
+        );
+        assert_close(
+            &format!("{ctx}: depth"),
+            &out.depth,
+            &fwd.depth,
+            Tol::Elementwise {
+                abs: 2e-5,
+                rel: 2e-5,
+            },
+        );
+        assert_close(
             &format!("{ctx}: final T"),
             &out.final_t,
             &fwd.final_t,
-            2e-5,
-            1e-4,
+            Tol::Elementwise {
+                abs: 2e-5,
+                rel: 1e-4,
+            },
         );
-        close_abs(
+        assert_close(
             &format!("{ctx}: features"),
             &out.features,
             &fwd.features,
-            2e-5,
-            2e-5,
+            Tol::Elementwise {
+                abs: 2e-5,
+                rel: 2e-5,
+            },
         );
         let diff = out
             .n_contrib
@@ -192,29 +208,33 @@ fn check_grads(
             .flat_map(|i| grads.grad2d[s * i + lo..s * i + hi].to_vec())
             .collect()
     };
-    close_kind(
+    assert_close(
         &format!("{ctx}: d mean2d"),
         &col(0, 2),
         bg.mean2d.as_flattened(),
+        KIND,
     );
-    close_kind(
+    assert_close(
         &format!("{ctx}: d conic"),
         &col(2, 5),
         bg.conic.as_flattened(),
+        KIND,
     );
-    close_kind(&format!("{ctx}: d opacity"), &col(5, 6), &bg.opacity);
-    close_kind(
+    assert_close(&format!("{ctx}: d opacity"), &col(5, 6), &bg.opacity, KIND);
+    assert_close(
         &format!("{ctx}: d colour"),
         &col(6, 9),
         bg.color.as_flattened(),
+        KIND,
     );
-    close_kind(&format!("{ctx}: d depth"), &col(9, 10), &bg.depth);
+    assert_close(&format!("{ctx}: d depth"), &col(9, 10), &bg.depth, KIND);
     if abs_grad {
         let abs = col(10, 12);
-        close_kind(
+        assert_close(
             &format!("{ctx}: Σ|d mean2d|"),
             &abs,
             bg.mean2d_abs.as_flattened(),
+            KIND,
         );
         // |Σ| ≤ Σ|·| per component: the statistic bounds the plain gradient.
         for (a, m) in abs.iter().zip(col(0, 2)) {
@@ -233,33 +253,38 @@ fn check_grads(
         col(12, 13).iter().all(|&v| v == 0.0),
         "{ctx}: slot 12 written without detach_feature_weights"
     );
-    close_kind(
+    assert_close(
         &format!("{ctx}: d features"),
         &grads.d_features,
         &bg.features,
+        KIND,
     );
 
-    close_kind(
+    assert_close(
         &format!("{ctx}: d means"),
         &grads.d_means,
         pg.means.as_flattened(),
+        KIND,
     );
-    close_kind(
+    assert_close(
         &format!("{ctx}: d scales"),
         &grads.d_scales,
         pg.scales.as_flattened(),
+        KIND,
     );
-    close_kind(
+    assert_close(
         &format!("{ctx}: d quats"),
         &grads.d_quats,
         pg.quats.as_flattened(),
+        KIND,
     );
-    close_kind(
+    assert_close(
         &format!("{ctx}: d logits"),
         &grads.d_logits,
         &pg.opacity_logits,
+        KIND,
     );
-    close_kind(&format!("{ctx}: d sh"), &grads.d_sh, &pg.sh);
+    assert_close(&format!("{ctx}: d sh"), &grads.d_sh, &pg.sh, KIND);
 }
 
 #[test]
@@ -442,16 +467,22 @@ fn feature_weights_detached_from_the_opacity_factors() {
             let grad2d = read(&b.grad2d, s);
             let slot12: Vec<f32> = (0..n).map(|i| grad2d[s * i + 12]).collect();
             if detach {
-                close_kind(&format!("{ctx}: slot 12"), &slot12, &bg.opacity_features);
+                assert_close(
+                    &format!("{ctx}: slot 12"),
+                    &slot12,
+                    &bg.opacity_features,
+                    KIND,
+                );
             } else {
                 assert!(slot12.iter().all(|&x| x == 0.0), "{ctx}: slot 12 written");
             }
             let want = if detach { &dw_d } else { &dw_a };
-            close_kind(&format!("{ctx}: d w"), &read(&b.d_op_scale, 1), want);
-            close_kind(
+            assert_close(&format!("{ctx}: d w"), &read(&b.d_op_scale, 1), want, KIND);
+            assert_close(
                 &format!("{ctx}: d logits"),
                 &read(&b.d_opacity_logits, 1),
                 &pg_a.opacity_logits,
+                KIND,
             );
         }
     }

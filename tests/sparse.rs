@@ -17,12 +17,6 @@ use dispflow_vk::train::passes::sparsity::{Classifier, ProbeConfig};
 use dispflow_vk::train::passes::{DeformPass, Slot, StepSizes};
 use dispflow_vk::vk::Recorder;
 
-fn uniform(r: &mut Noise, n: usize, lo: f32, hi: f32) -> Vec<f32> {
-    (0..n)
-        .map(|_| lo + (hi - lo) * (r.next_u32() as f32 / 4_294_967_296.0))
-        .collect()
-}
-
 /// Three probe samples on the GPU and the twin: pixels within 1e-5 relative, midranges
 /// within 1 ulp-ish, flags equal wherever the pixels are not within that of the threshold;
 /// returns the GPU flags.
@@ -32,18 +26,18 @@ fn probe_case(seed: u64, n: usize, extremes: bool) -> Vec<u32> {
     let mut r = Noise::new(seed);
     // A constant offset per Gaussian (not motion) plus a small variation; every third
     // Gaussian varies ~100× more.
-    let offset = uniform(&mut r, n * 10, -0.2, 0.2);
+    let offset = r.uniforms(n * 10, -0.2, 0.2);
     let mut samples: Vec<Vec<f32>> = (0..3)
         .map(|_| {
-            let mut d = uniform(&mut r, n * 10, -1e-3, 1e-3);
+            let mut d = r.uniforms(n * 10, -1e-3, 1e-3);
             for i in (0..n).step_by(3) {
                 d[10 * i] *= 100.0;
             }
             d.iter().zip(&offset).map(|(a, b)| a + b).collect()
         })
         .collect();
-    let mut log_scales = uniform(&mut r, n * 3, -5.0, -1.0);
-    let mut means = uniform(&mut r, n * 3, -1.0, 1.0);
+    let mut log_scales = r.uniforms(n * 3, -5.0, -1.0);
+    let mut means = r.uniforms(n * 3, -1.0, 1.0);
     let cams = [[0.0, 0.0, -4.0, 100.0], [3.0, 0.5, 0.0, 140.0f32]];
     if extremes {
         samples[1][0] = f32::NAN; // a diverged deformation
@@ -146,14 +140,14 @@ fn compaction_gather_and_expand_match_twin() {
         // p: percent dynamic (0: none, 100: all).
         let flags: Vec<u32> = (0..n).map(|_| (r.next_u32() % 100 < p) as u32).collect();
         let width = 10;
-        let src = uniform(&mut r, n * width, -1.0, 1.0);
+        let src = r.uniforms(n * width, -1.0, 1.0);
         let fb = gpu.buffer_from("flags", &flags).unwrap();
         let sb = gpu.buffer_from("src", &src).unwrap();
         let bytes = n as u64 * 4;
         let [off, idx, row_of, count] = ["offsets", "idx", "row of", "count"]
             .map(|name| gpu.buffer(name, bytes.max(256)).unwrap());
         let gathered = gpu.buffer("gathered", bytes * width as u64).unwrap();
-        let fixed = uniform(&mut r, n * width, 5.0, 6.0);
+        let fixed = r.uniforms(n * width, 5.0, 6.0);
         let fb2 = gpu.buffer_from("fixed", &fixed).unwrap();
         let expanded = gpu.buffer("expanded", bytes * width as u64).unwrap();
         for (i, b) in [&idx, &row_of, &count, &gathered, &expanded]
@@ -242,7 +236,7 @@ fn model(gpu: &dispflow_vk::vk::Gpu, n: usize, seed: u64) -> Model {
     let mut r = Noise::new(seed);
     let pts: Vec<[f32; 3]> = (0..n)
         .map(|_| {
-            let v = uniform(&mut r, 3, -1.0, 1.0);
+            let v = r.uniforms(3, -1.0, 1.0);
             [v[0], v[1], v[2]]
         })
         .collect();
@@ -274,7 +268,7 @@ fn split_mlp_equals_dense_mlp_on_the_dynamic_rows() {
     let pass = DeformPass::new(&gpu, &m.deform.cfg, None, &sizes, 1, true).unwrap();
     let mut r = Noise::new(9);
     let flags: Vec<u32> = (0..n).map(|_| (r.next_u32() % 4 == 0) as u32).collect();
-    let d_out = uniform(&mut r, n * OUT_DIMS, -1.0, 1.0);
+    let d_out = r.uniforms(n * OUT_DIMS, -1.0, 1.0);
     let masked: Vec<f32> = (0..n * OUT_DIMS)
         .map(|j| {
             if flags[j / OUT_DIMS] == 1 {
@@ -300,7 +294,7 @@ fn split_mlp_equals_dense_mlp_on_the_dynamic_rows() {
     // Same noise before both runs: padding between tensors is never written.
     testing::fill_noise(&gpu, &m.deform.grads, 4);
     let (dense_out, dense_grad) = run(&m, &masked);
-    let fixed = uniform(&mut r, n * OUT_DIMS, -0.1, 0.1);
+    let fixed = r.uniforms(n * OUT_DIMS, -0.1, 0.1);
     let split = SplitSnapshot {
         flags: flags.clone(),
         fixed: fixed.clone(),
@@ -391,7 +385,7 @@ fn late_mover_is_picked_up_by_the_next_split() {
     let mut r = Noise::new(11);
     let pts: Vec<[f32; 3]> = (0..n)
         .map(|i| {
-            let v = uniform(&mut r, 2, -0.5, 0.5);
+            let v = r.uniforms(2, -0.5, 0.5);
             [-1.0 + 2.0 * i as f32 / (n - 1) as f32, v[0], v[1]]
         })
         .collect();

@@ -14,7 +14,7 @@ use dispflow_vk::reference::raster::Camera;
 use dispflow_vk::reference::step::{
     dispflow_step, step_loss_f64, NormGradMode, StepInputs, StepNodes, StepOutputs, StepParams64,
 };
-use dispflow_vk::testing::{rot_from_angles, Noise};
+use dispflow_vk::testing::{max_abs, rot_from_angles, Noise};
 
 // ---------------------------------------------------------------------------------------------
 // Scene
@@ -41,10 +41,6 @@ const W: u32 = 24;
 const H: u32 = 20;
 const T1: f32 = 0.3;
 const T2: f32 = 0.55;
-
-fn unif(r: &mut Noise, lo: f64, hi: f64) -> f64 {
-    lo + (hi - lo) * ((r.next_u32() >> 8) as f64 / 16_777_216.0)
-}
 
 /// The trainer's MLP for `mlp_depth = 2`, `mlp_width = 16` on a blender scene: synthetic time
 /// net with its hidden width following the trunk width, no skip (depth < 3).
@@ -103,24 +99,24 @@ fn scene(seed: u64, n: usize) -> Scene {
     };
     for _ in 0..n {
         // Inside the view (±45 % of the half-extent), 3–5 units deep.
-        let z = unif(&mut r, 3.0, 5.0);
-        let xz = unif(&mut r, -0.45, 0.45) * W as f64 / fx as f64;
-        let yz = unif(&mut r, -0.45, 0.45) * H as f64 / fy as f64;
+        let z = r.uniform(3.0, 5.0);
+        let xz = r.uniform(-0.45, 0.45) * W as f64 / fx as f64;
+        let yz = r.uniform(-0.45, 0.45) * H as f64 / fy as f64;
         g.means.push(world([xz * z, yz * z, z]));
         g.log_scales
-            .push(std::array::from_fn(|_| unif(&mut r, 0.12, 0.4).ln() as f32));
+            .push(std::array::from_fn(|_| r.uniform(0.12f64, 0.4).ln() as f32));
         let q: [f32; 4] = loop {
-            let q = std::array::from_fn(|_| unif(&mut r, -1.0, 1.0) as f32);
+            let q = std::array::from_fn(|_| r.uniform(-1.0, 1.0) as f32);
             if q.iter().map(|v| v * v).sum::<f32>() > 0.2 {
                 break q;
             }
         };
         g.quats.push(q);
-        g.opacity.push(unif(&mut r, -1.0, 2.0) as f32);
+        g.opacity.push(r.uniform(-1.0, 2.0) as f32);
         g.sh_dc
-            .push(std::array::from_fn(|_| unif(&mut r, -0.8, 0.8) as f32));
+            .push(std::array::from_fn(|_| r.uniform(-0.8, 0.8) as f32));
         for _ in 0..3 * (sh_coeffs - 1) {
-            g.sh_rest.push(unif(&mut r, -0.3, 0.3) as f32);
+            g.sh_rest.push(r.uniform(-0.3, 0.3) as f32);
         }
     }
 
@@ -153,7 +149,7 @@ fn scene(seed: u64, n: usize) -> Scene {
     for py in 0..H {
         for px in 0..W {
             let (x, y) = (px as f64, py as f64);
-            let mut u = || unif(&mut r, -0.05, 0.05);
+            let mut u = || r.uniform(-0.05, 0.05);
             target.push([
                 (0.5 + 0.3 * (0.4 * x + 0.2 * y).sin() + u()) as f32,
                 (0.45 + 0.3 * (0.3 * y - 0.1 * x).cos() + u()) as f32,
@@ -463,10 +459,6 @@ fn flat_grads(o: &StepOutputs) -> Vec<f64> {
         .chain(&o.d_mlp)
         .copied()
         .collect()
-}
-
-fn max_abs(v: impl IntoIterator<Item = f64>) -> f64 {
-    v.into_iter().fold(0.0, |m, x| m.max(x.abs()))
 }
 
 /// Equal up to summation order: the MLP twin reduces its per-Gaussian gradients with rayon, so

@@ -12,12 +12,8 @@ use dispflow_vk::kernels::raster::{OutputGrads, RasterSize, Rasterizer, RenderOp
 use dispflow_vk::kernels::temporal::{Temporal, TemporalGrads, TemporalInputs, TemporalParams};
 use dispflow_vk::reference::raster as rtwin;
 use dispflow_vk::reference::temporal as twin;
-use dispflow_vk::testing::{self, Noise};
+use dispflow_vk::testing::{self, assert_close, Noise, Tol};
 use dispflow_vk::vk::Recorder;
-
-fn uniform(r: &mut Noise, lo: f64, hi: f64) -> f64 {
-    lo + (hi - lo) * (r.next_u32() as f64 / 4_294_967_296.0)
-}
 
 /// `n` rows, the first `first` canonical; transients with centres around `t`, widths from
 /// below the floor to several times it, velocities up to 3 units per unit time.
@@ -26,16 +22,14 @@ fn inputs(seed: u64, n: usize, p: &TemporalParams) -> twin::TemporalInputs {
     let mut x = twin::TemporalInputs::default();
     let floor = p.log_floor as f64;
     for _ in 0..n {
-        x.means
-            .push(std::array::from_fn(|_| uniform(&mut r, -1.0, 1.0)));
+        x.means.push(std::array::from_fn(|_| r.uniform(-1.0, 1.0)));
         x.log_scales
-            .push(std::array::from_fn(|_| uniform(&mut r, -4.0, -1.0)));
-        x.quats
-            .push(std::array::from_fn(|_| uniform(&mut r, -1.0, 1.0)));
-        x.centre.push(p.t as f64 + uniform(&mut r, -0.15, 0.15));
-        x.log_width.push(floor + uniform(&mut r, -0.5, 1.5));
+            .push(std::array::from_fn(|_| r.uniform(-4.0, -1.0)));
+        x.quats.push(std::array::from_fn(|_| r.uniform(-1.0, 1.0)));
+        x.centre.push(p.t as f64 + r.uniform(-0.15, 0.15));
+        x.log_width.push(floor + r.uniform(-0.5, 1.5));
         x.velocity
-            .push(std::array::from_fn(|_| uniform(&mut r, -3.0, 3.0)));
+            .push(std::array::from_fn(|_| r.uniform(-3.0, 3.0)));
     }
     x
 }
@@ -57,13 +51,10 @@ fn upstream(seed: u64, n: usize) -> twin::TemporalUpstream {
     let mut r = Noise::new(seed);
     let mut u = twin::TemporalUpstream::default();
     for _ in 0..n {
-        u.means
-            .push(std::array::from_fn(|_| uniform(&mut r, -1.0, 1.0)));
-        u.scales
-            .push(std::array::from_fn(|_| uniform(&mut r, -1.0, 1.0)));
-        u.quats
-            .push(std::array::from_fn(|_| uniform(&mut r, -1.0, 1.0)));
-        u.op_scale.push(uniform(&mut r, -1.0, 1.0));
+        u.means.push(std::array::from_fn(|_| r.uniform(-1.0, 1.0)));
+        u.scales.push(std::array::from_fn(|_| r.uniform(-1.0, 1.0)));
+        u.quats.push(std::array::from_fn(|_| r.uniform(-1.0, 1.0)));
+        u.op_scale.push(r.uniform(-1.0, 1.0));
     }
     u
 }
@@ -167,12 +158,16 @@ fn run(p: &TemporalParams, x: &twin::TemporalInputs, u: &twin::TemporalUpstream)
     }
 }
 
-fn close(what: &str, got: f32, want: f64, tol: f64) {
-    assert!(
-        got.is_finite() && (got as f64 - want).abs() <= tol * (1.0 + want.abs()),
-        "{what}: gpu {got}, twin {want}"
-    );
-}
+/// `|gpu − twin| ≤ 1e-5·(1 + |twin|)`.
+const TOL_1E5: Tol = Tol::Elementwise {
+    abs: 1e-5,
+    rel: 1e-5,
+};
+/// `|gpu − twin| ≤ 1e-4·(1 + |twin|)`.
+const TOL_1E4: Tol = Tol::Elementwise {
+    abs: 1e-4,
+    rel: 1e-4,
+};
 
 /// Rows whose weight is within 1e-3 of the cut-off, or whose width is within 1e-4 of the floor:
 /// the f32 GPU and the f64 twin may decide them differently.
@@ -216,11 +211,11 @@ fn temporal_kernels_match_the_twin() {
                 assert_eq!(got.peak[i], logits[i] as f32, "{ctx}: peak");
                 continue;
             }
-            close(
+            assert_close(
                 &format!("{ctx}: δ"),
-                got.delta[3 * i + 1],
-                disp[i].unwrap()[1],
-                1e-5,
+                &[got.delta[3 * i + 1]],
+                &[disp[i].unwrap()[1]],
+                TOL_1E5,
             );
             if on_an_edge(&p, &x, i, p.t as f64) {
                 continue;
@@ -231,63 +226,68 @@ fn temporal_kernels_match_the_twin() {
             } else {
                 culled += 1;
             }
-            close(&format!("{ctx}: w"), got.op_scale[i], w, 1e-5);
+            assert_close(&format!("{ctx}: w"), &[got.op_scale[i]], &[w], TOL_1E5);
             for a in 0..3 {
-                close(
+                assert_close(
                     &format!("{ctx}: mean"),
-                    got.means[3 * i + a],
-                    fwd.means[i].unwrap()[a],
-                    1e-5,
+                    &[got.means[3 * i + a]],
+                    &[fwd.means[i].unwrap()[a]],
+                    TOL_1E5,
                 );
-                close(
+                assert_close(
                     &format!("{ctx}: scale"),
-                    got.scales[3 * i + a],
-                    fwd.scales[i].unwrap()[a],
-                    1e-5,
+                    &[got.scales[3 * i + a]],
+                    &[fwd.scales[i].unwrap()[a]],
+                    TOL_1E5,
                 );
-                close(
+                assert_close(
                     &format!("{ctx}: g mean"),
-                    got.g[0][3 * i + a],
-                    bwd.means[i][a],
-                    1e-5,
+                    &[got.g[0][3 * i + a]],
+                    &[bwd.means[i][a]],
+                    TOL_1E5,
                 );
-                close(
+                assert_close(
                     &format!("{ctx}: g log-scale"),
-                    got.g[1][3 * i + a],
-                    bwd.log_scales[i][a],
-                    1e-5,
+                    &[got.g[1][3 * i + a]],
+                    &[bwd.log_scales[i][a]],
+                    TOL_1E5,
                 );
                 let gv = bwd.velocity[i][a] + disp_bwd[i][a];
-                close(&format!("{ctx}: g velocity"), got.g[5][3 * i + a], gv, 1e-4);
+                assert_close(
+                    &format!("{ctx}: g velocity"),
+                    &[got.g[5][3 * i + a]],
+                    &[gv],
+                    TOL_1E4,
+                );
             }
             for a in 0..4 {
-                close(
+                assert_close(
                     &format!("{ctx}: quat"),
-                    got.quats[4 * i + a],
-                    fwd.quats[i].unwrap()[a],
-                    1e-5,
+                    &[got.quats[4 * i + a]],
+                    &[fwd.quats[i].unwrap()[a]],
+                    TOL_1E5,
                 );
-                close(
+                assert_close(
                     &format!("{ctx}: g quat"),
-                    got.g[2][4 * i + a],
-                    bwd.quats[i][a],
-                    1e-4,
+                    &[got.g[2][4 * i + a]],
+                    &[bwd.quats[i][a]],
+                    TOL_1E4,
                 );
             }
-            close(
+            assert_close(
                 &format!("{ctx}: g centre"),
-                got.g[3][i],
-                bwd.centre[i],
-                1e-4,
+                &[got.g[3][i]],
+                &[bwd.centre[i]],
+                TOL_1E4,
             );
-            close(
+            assert_close(
                 &format!("{ctx}: g log-width"),
-                got.g[4][i],
-                bwd.log_width[i],
-                1e-4,
+                &[got.g[4][i]],
+                &[bwd.log_width[i]],
+                TOL_1E4,
             );
             if peak[i].is_finite() {
-                close(&format!("{ctx}: peak"), got.peak[i], peak[i], 1e-4);
+                assert_close(&format!("{ctx}: peak"), &[got.peak[i]], &[peak[i]], TOL_1E4);
             } else {
                 assert_eq!(got.peak[i], f32::NEG_INFINITY, "{ctx}: a never-alive peak");
             }
@@ -378,7 +378,7 @@ fn the_opacity_factor_through_the_rasteriser() {
             if i % 3 == 0 {
                 0.0
             } else {
-                uniform(&mut r, 0.05, 1.0) as f32
+                r.uniform(0.05, 1.0) as f32
             }
         })
         .collect();
@@ -415,7 +415,12 @@ fn the_opacity_factor_through_the_rasteriser() {
         }
         if proj.radius[i] > 0 {
             visible += 1;
-            close(&format!("opacity {i}"), a[3], proj.opacity[i], 1e-5);
+            assert_close(
+                &format!("opacity {i}"),
+                &[a[3]],
+                &[proj.opacity[i]],
+                TOL_1E5,
+            );
         }
     }
     assert!(visible > 10, "{visible} visible");

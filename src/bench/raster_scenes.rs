@@ -52,9 +52,11 @@ impl RasterScene {
     }
 }
 
-fn uniform(seed: u64) -> impl FnMut() -> f32 {
+/// `seed`'s draws of [`Noise::uniform`] in `[0, 1]` plus half a step, so never 0 (as these
+/// scenes have always been drawn).
+fn draws(seed: u64) -> impl FnMut() -> f32 {
     let mut r = Noise::new(seed);
-    move || (r.next_u32() as f32 + 0.5) / 4_294_967_296.0
+    move || r.uniform(0.0, 1.0) + 0.5 / 4_294_967_296.0
 }
 
 fn push_sh(h: &mut HostSplats, u: &mut impl FnMut() -> f32) {
@@ -64,7 +66,7 @@ fn push_sh(h: &mut HostSplats, u: &mut impl FnMut() -> f32) {
 }
 
 fn dnerf_like(n: usize) -> (HostSplats, Camera) {
-    let mut u = uniform(114);
+    let mut u = draws(114);
     let mut h = HostSplats::default();
     let centres = [[0.0, 0.0, 4.0], [0.5, -0.4, 4.3], [-0.45, 0.35, 4.2]];
     let radii = [0.8f32, 0.55, 0.5];
@@ -102,7 +104,7 @@ fn dnerf_like(n: usize) -> (HostSplats, Camera) {
 
 fn builtin(n: usize) -> (HostSplats, Camera) {
     let pts = sample_points(0, n);
-    let mut u = uniform(160);
+    let mut u = draws(160);
     let mut h = HostSplats::default();
     for (i, p) in pts.iter().enumerate() {
         // Mean distance to the 3 nearest points (brute force: 10^4 points, once).
