@@ -4,10 +4,12 @@
 mod data_util;
 
 use dispflow_vk::data::{self, Format, LoadOptions, PointSource};
+use dispflow_vk::testing::{assert_close, Tol};
 use glam::Vec3;
 
-fn close(a: f32, b: f32, tol: f32) -> bool {
-    (a - b).abs() <= tol
+/// `|got − want| ≤ abs`.
+const fn within(abs: f64) -> Tol {
+    Tol::Elementwise { abs, rel: 0.0 }
 }
 
 #[test]
@@ -22,20 +24,23 @@ fn blender_cameras_follow_opencv_after_conversion() {
     assert!((c.centre() - Vec3::new(0.0, 0.0, 4.0)).length() < 1e-6);
     assert!((c.forward() - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-6);
     let fx = (0.5 * 16.0 / (0.5f64 * 0.8).tan()) as f32;
-    assert!(close(c.fx, fx, 1e-3) && close(c.fy, fx, 1e-3), "{c:?}");
-    assert!(close(c.cx, 8.0, 1e-6) && close(c.cy, 6.0, 1e-6));
+    assert_close("fx, fy", &[c.fx, c.fy], &[fx, fx], within(1e-3));
+    assert_close("cx, cy", &[c.cx, c.cy], &[8.0f32, 6.0], within(1e-6));
     let (o, depth) = c.project(Vec3::ZERO).unwrap();
-    assert!(close(o.x, 8.0, 1e-4) && close(o.y, 6.0, 1e-4) && close(depth, 4.0, 1e-5));
+    assert_close("origin", &[o.x, o.y], &[8.0f32, 6.0], within(1e-4));
+    assert_close("origin depth", &[depth], &[4.0f32], within(1e-5));
     // World +x is image right, world +y (up) is image up (smaller row).
     let (px, _) = c.project(Vec3::X).unwrap();
-    assert!(close(px.x, 8.0 + fx / 4.0, 1e-3) && close(px.y, 6.0, 1e-4));
+    assert_close("+x column", &[px.x], &[8.0 + fx / 4.0], within(1e-3));
+    assert_close("+x row", &[px.y], &[6.0f32], within(1e-4));
     let (py, _) = c.project(Vec3::Y).unwrap();
-    assert!(close(py.y, 6.0 - fx / 4.0, 1e-3));
+    assert_close("+y row", &[py.y], &[6.0 - fx / 4.0], within(1e-3));
     // Per-frame intrinsics override camera_angle_x.
     let v = &ds.val[0].camera;
     assert_eq!((v.fx, v.fy, v.cx, v.cy), (30.0, 31.0, 7.0, 5.5));
     // Times kept as given (all in [0,1]).
-    assert!(close(ds.train[2].time, 2.0 / 3.0, 1e-6) && close(ds.val[0].time, 0.5, 1e-6));
+    let times = [ds.train[2].time, ds.val[0].time];
+    assert_close("times", &times, &[2.0f32 / 3.0, 0.5], within(1e-6));
 }
 
 #[test]
@@ -51,12 +56,12 @@ fn blender_rgba_composited_masks_and_ply() {
     // alpha 0 → background, alpha 255 → colour, alpha 128 → the mix.
     assert_eq!(im.pixel(0, 3), [0.0, 0.0, 1.0]);
     let c = im.pixel(10, 3);
-    assert!(close(c[0], 200.0 / 255.0, 1e-6) && close(c[1], 30.0 / 255.0, 1e-6));
+    let colour = [200.0f32 / 255.0, 30.0 / 255.0];
+    assert_close("colour", &c[..2], &colour, within(1e-6));
     let m = im.pixel(5, 0);
     let a = 128.0 / 255.0;
-    assert!(
-        close(m[0], 200.0 / 255.0 * a, 1e-5) && close(m[2], 10.0 / 255.0 * a + (1.0 - a), 1e-5)
-    );
+    let mix = [200.0f32 / 255.0 * a, 10.0 / 255.0 * a + (1.0 - a)];
+    assert_close("half-transparent mix", &[m[0], m[2]], &mix, within(1e-5));
     // Masks: label > 0 → moving, train only.
     let mask = ds.train[0].mask.as_ref().unwrap();
     assert_eq!(mask[11], 0);
