@@ -17,9 +17,11 @@
 //!   which never imports from it.
 //! - [`sweep`]: plans of scenes × variants × seeds run as `train` + `eval` processes
 //!   (locally or as a Slurm job array) and the tables built from their results.
+//! - [`results`]: the cell-result files (`cell.json`, `results.jsonl`) that `sweep` and
+//!   `eval reference` write, below both.
 //! - [`stats`]: small shared statistics (a median), below every user.
-//! - [`report`]: CPU-drawn pictures (heat maps, labelled strips, line plots) and Markdown
-//!   tables for `eval` and `render`.
+//! - [`report`]: CPU-drawn pictures (heat maps, labelled strips, line plots), Markdown
+//!   tables and the terminal progress bar for `eval`, `render` and `sweep`.
 
 pub mod bench;
 pub mod data;
@@ -30,6 +32,7 @@ pub mod linalg;
 pub mod model;
 pub mod reference;
 pub mod report;
+pub mod results;
 pub mod shaders;
 pub mod stats;
 pub mod sweep;

@@ -9,7 +9,7 @@ mod train_common;
 use std::path::Path;
 
 use dispflow_vk::data::{self, LoadOptions};
-use dispflow_vk::sweep::results::read_results;
+use dispflow_vk::results::read_results;
 use train_common::tiny_scene;
 
 /// Writes `img` (RGB in [0,1], `w·h·3`) as an 8-bit PNG and returns the values as saved.

@@ -14,7 +14,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use dispflow_vk::report::Table;
-use dispflow_vk::sweep::results::{read_results, CellResult};
+use dispflow_vk::results::{read_results, write_results, CellResult};
 
 /// The tiny run of every cell: deformation from 10, motion term from 20, densification and
 /// a checkpoint every 5 iterations.
@@ -257,7 +257,7 @@ fn a_tiny_plan_runs_end_to_end_is_skipped_when_done_and_its_tables_rebuild() {
     bad[0].status_note = Some("ended below its initial test PSNR (7.03 < 13.15 dB)".into());
     let flagged = s.root.join("flagged");
     std::fs::create_dir_all(&flagged).unwrap();
-    dispflow_vk::sweep::results::write_results(&flagged, &bad).unwrap();
+    write_results(&flagged, &bad).unwrap();
     let (ok, out) = s.sweep(&["report", "flagged"]);
     assert!(ok, "{out}");
     for t in ["image", "motion", "trade"] {

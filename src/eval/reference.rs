@@ -19,7 +19,7 @@ use serde::Serialize;
 use crate::data::{self, Dataset, LoadOptions};
 use crate::error::{Error, Result};
 use crate::kernels::loss::PhotometricLoss;
-use crate::sweep::results::{write_results, CellResult, CELL_JSON};
+use crate::results::{cell_files, cell_key, read_cell, write_cell, write_results, CellResult};
 use crate::train::checkpoint::write_atomic;
 use crate::train::config::Background;
 use crate::train::score::lpips::LpipsScorer;
@@ -289,12 +289,7 @@ pub fn run_score(a: &ScoreArgs) -> Result<CellResult> {
             .unwrap_or_else(|| "scene".into())
     });
     let variant = a.variant.clone().unwrap_or_else(|| a.method.clone());
-    let key = format!(
-        "{}/{}/seed{}",
-        crate::sweep::plan::safe(&scene),
-        crate::sweep::plan::safe(&variant),
-        a.seed
-    );
+    let key = cell_key(&scene, &variant, a.seed);
     let dir = a.out.join("cells").join(&key);
     std::fs::create_dir_all(&dir).map_err(|e| invalid(&dir, format!("cannot create: {e}")))?;
     let metrics = serde_json::to_string_pretty(&report).expect("report serialises");
@@ -337,16 +332,11 @@ pub fn run_score(a: &ScoreArgs) -> Result<CellResult> {
         status: None,
         status_note: None,
     };
-    write_atomic(
-        &dir.join(CELL_JSON),
-        serde_json::to_string_pretty(&result)
-            .expect("result serialises")
-            .as_bytes(),
-    )?;
+    write_cell(&dir, &result)?;
     // results.jsonl: the sweep's cells, this one included.
-    let all = crate::sweep::results::cell_files(&a.out)
+    let all = cell_files(&a.out)
         .iter()
-        .map(|f| crate::sweep::results::read_cell(f))
+        .map(|f| read_cell(f))
         .collect::<Result<Vec<_>>>()?;
     write_results(&a.out, &all)?;
     println!(

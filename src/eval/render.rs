@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use glam::{Mat3, Vec3};
 
-use super::run::{load_trainer, open_run, progress};
+use super::run::{load_trainer, open_run};
 use crate::error::{Error, Result};
 use crate::kernels::raster::Camera;
 use crate::report;
@@ -283,7 +283,7 @@ pub fn run_render(a: &RenderArgs) -> Result<Vec<PathBuf>> {
             a.fps
         )));
     }
-    let pb = progress(views.len() as u64, "render");
+    let pb = report::progress(views.len() as u64, "render");
     let mut written = Vec::new();
     let mut gif_frames = Vec::new();
     let mut plys = Vec::new();

@@ -344,7 +344,7 @@ fn eval_one(
         return Err(invalid(&run.data_dir, "the dataset has no test frames"));
     }
     let out = run.dir.join("eval");
-    let pb = progress(tr.val.len() as u64, "eval");
+    let pb = report::progress(tr.val.len() as u64, "eval");
     pb.set_message(run.dir.display().to_string());
     let mut per = Vec::with_capacity(tr.val.len());
     for i in 0..tr.val.len() {
@@ -410,18 +410,6 @@ fn eval_one(
         out.display()
     );
     Ok(r)
-}
-
-/// A progress bar with ETA for `len` items of `what`.
-pub fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
-    let pb = indicatif::ProgressBar::new(len);
-    pb.set_style(
-        indicatif::ProgressStyle::with_template(&format!(
-            "{what} {{bar:30}} {{pos}}/{{len}} [{{elapsed_precise}}<{{eta_precise}}] {{msg}}"
-        ))
-        .expect("progress template"),
-    );
-    pb
 }
 
 /// render | ground truth | error | displacement flow | optical flow (frozen render → ground

@@ -5,6 +5,7 @@
 //! - [`colormap`]: heat maps (INFERNO), masks, render-vs-ground-truth error, plain renders;
 //! - [`strip`]: labelled panels side by side, and atomic PNG writing;
 //! - [`plot`]: line plots of training/eval curves;
+//! - [`progress()`]: the terminal progress bar of long loops (eval, render, sweep cells);
 //! - [`table`]: Markdown metric tables;
 //! - [`text`]: the 8x8 bitmap text all of the above use.
 //!
@@ -14,12 +15,14 @@
 pub mod colormap;
 mod draw;
 pub mod plot;
+mod progress;
 pub mod strip;
 pub mod table;
 pub mod text;
 
 pub use colormap::{error_map, heatmap, mask_image, rgb_image, ERROR_FULL_SCALE};
 pub use plot::{stacked, Plot, Series, PALETTE};
+pub use progress::progress;
 pub use strip::{labelled_strip, save_png};
 pub use table::{fmt_metric, Table};
 pub use text::{draw_text, text_width};

@@ -9,8 +9,8 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use super::plan::{train_args, Cell};
-use super::results::{read_cell, CellResult, CELL_JSON};
 use crate::error::{Error, Result};
+use crate::results::{read_cell, write_cell, CellResult, CELL_JSON};
 use crate::train::checkpoint::write_atomic;
 
 /// Markers of a finished stage, so a re-run never retrains (which would overwrite the
@@ -88,12 +88,7 @@ impl CellEnv {
             write_atomic(&dir.join(EVAL_OK), b"")?;
         }
         let r = self.result(c, &run, t0.elapsed().as_secs_f64())?;
-        write_atomic(
-            &dir.join(CELL_JSON),
-            serde_json::to_string_pretty(&r)
-                .expect("result serialises")
-                .as_bytes(),
-        )?;
+        write_cell(&dir, &r)?;
         Ok(r)
     }
 

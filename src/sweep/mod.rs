@@ -5,7 +5,6 @@
 
 pub mod exec;
 pub mod plan;
-pub mod results;
 pub mod slurm;
 pub mod tables;
 
@@ -14,10 +13,10 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::results::{self, CellResult};
 use crate::train::checkpoint::write_atomic;
 use exec::CellEnv;
 use plan::{Plan, TableKind, TradeSpec};
-use results::CellResult;
 
 #[derive(clap::Args, Debug, Clone)]
 #[command(args_conflicts_with_subcommands = true)]
@@ -202,7 +201,7 @@ pub fn run(a: &SweepArgs) -> Result<()> {
         todo.len(),
         root.display()
     );
-    let pb = crate::eval::run::progress(cells.len() as u64, "cells");
+    let pb = crate::report::progress(cells.len() as u64, "cells");
     pb.set_position((cells.len() - todo.len()) as u64);
     let todo: Vec<plan::Cell> = todo.into_iter().cloned().collect();
     let failures = exec::run_pool(&env, &todo, jobs as usize, &|c, r| {

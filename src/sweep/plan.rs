@@ -9,6 +9,7 @@ use clap::{CommandFactory, Parser};
 use serde::Deserialize;
 
 use crate::error::{Error, Result};
+use crate::results::{cell_key, safe};
 use crate::train::cli::{resolve_config_with, TrainArgs};
 
 /// A plan file (`tools/plans/*.toml`; the format is in `docs/sweep.md`).
@@ -289,7 +290,7 @@ impl Plan {
                         scene: s.name.clone(),
                         variant: v.name.clone(),
                         seed,
-                        key: format!("{}/{}/seed{seed}", safe(&s.name), safe(&v.name)),
+                        key: cell_key(&s.name, &v.name, seed),
                         data: data.clone(),
                         args,
                         config_toml: config_toml.clone(),
@@ -299,19 +300,6 @@ impl Plan {
         }
         Ok(cells)
     }
-}
-
-/// A name as one file-name-safe path component.
-pub fn safe(name: &str) -> String {
-    name.chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '.' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
 }
 
 /// Refuses duplicate names, and names that map to the same directory.

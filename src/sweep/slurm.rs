@@ -85,7 +85,7 @@ pub fn write_scripts(
     let dir = root.join("slurm");
     let logs = dir.join("logs");
     std::fs::create_dir_all(&logs).map_err(Error::io(&logs))?;
-    let job = format!("dispflow-{}", super::plan::safe(name));
+    let job = format!("dispflow-{}", crate::results::safe(name));
     let mut cells = header(&job, &logs.join("cell_%a.out"), Some(spec));
     cells += &format!("#SBATCH --array={}%{jobs}\n", array_spec(todo));
     cells += &format!(

@@ -4,8 +4,8 @@
 //! seeds, as Markdown and CSV.
 
 use super::plan::TableKind;
-use super::results::CellResult;
 use crate::report::{Plot, Series, Table};
+use crate::results::CellResult;
 
 /// Mean and sample standard deviation of the seeds that have a value.
 #[derive(Debug, Clone, Copy, PartialEq)]

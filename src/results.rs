@@ -1,11 +1,14 @@
-//! One result per cell (`cells/<key>/cell.json`) and their concatenation in plan order,
-//! `results.jsonl`, which is all `sweep report` needs to rebuild the tables.
+//! The cell-result format that `sweep` and `eval reference` write and `sweep report` reads:
+//! one result per cell (`cells/<key>/cell.json`, the key `scene/variant/seedN` with
+//! file-name-safe parts) and their concatenation in plan order, `results.jsonl`, which is all
+//! `sweep report` needs to rebuild the tables.
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::train::checkpoint::write_atomic;
 
 /// What a finished cell measured: the `train` report's speed, the `eval` report's quality.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -57,6 +60,25 @@ pub struct CellResult {
 pub const RESULTS: &str = "results.jsonl";
 pub const CELL_JSON: &str = "cell.json";
 
+/// A name as one file-name-safe path component.
+pub fn safe(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// The key of a cell, `scene/variant/seedN` with file-name-safe parts: also its directory
+/// under `cells/`.
+pub fn cell_key(scene: &str, variant: &str, seed: u64) -> String {
+    format!("{}/{}/seed{seed}", safe(scene), safe(variant))
+}
+
 /// Reads `results.jsonl`; a malformed line is refused with its line number.
 pub fn read_results(path: &Path) -> Result<Vec<CellResult>> {
     let text = std::fs::read_to_string(path).map_err(Error::io(path))?;
@@ -73,6 +95,12 @@ pub fn read_results(path: &Path) -> Result<Vec<CellResult>> {
             })
         })
         .collect()
+}
+
+/// Writes `r` as `dir/cell.json` (atomically).
+pub fn write_cell(dir: &Path, r: &CellResult) -> Result<()> {
+    let text = serde_json::to_string_pretty(r).expect("result serialises");
+    write_atomic(&dir.join(CELL_JSON), text.as_bytes())
 }
 
 pub fn read_cell(path: &Path) -> Result<CellResult> {
@@ -110,7 +138,7 @@ pub fn write_results(root: &Path, results: &[CellResult]) -> Result<()> {
         text.push_str(&serde_json::to_string(r).expect("result serialises"));
         text.push('\n');
     }
-    crate::train::checkpoint::write_atomic(&root.join(RESULTS), text.as_bytes())
+    write_atomic(&root.join(RESULTS), text.as_bytes())
 }
 
 /// The results of a sweep directory: `results.jsonl` alone when no cell has its own file;
@@ -194,10 +222,16 @@ mod tests {
         }
     }
 
-    fn write_cell(root: &Path, r: &CellResult) {
+    fn put_cell(root: &Path, r: &CellResult) {
         let d = root.join("cells").join(&r.cell);
         std::fs::create_dir_all(&d).unwrap();
-        std::fs::write(d.join(CELL_JSON), serde_json::to_string(r).unwrap()).unwrap();
+        write_cell(&d, r).unwrap();
+    }
+
+    #[test]
+    fn cell_keys_are_file_name_safe() {
+        assert_eq!(cell_key("D-NeRF lego", "a/b", 3), "D-NeRF_lego/a_b/seed3");
+        assert_eq!(safe("x.y-z_ü"), "x.y-z__");
     }
 
     #[test]
@@ -211,8 +245,8 @@ mod tests {
         assert_eq!(gather(root, &[]).unwrap(), old);
         // One cell re-run into it, one new cell; the plan no longer has "gone".
         let (rerun, new) = (row("a/y/seed0", 20.0), row("c/x/seed0", 30.0));
-        write_cell(root, &rerun);
-        write_cell(root, &new);
+        put_cell(root, &rerun);
+        put_cell(root, &new);
         let order: Vec<String> = ["c/x/seed0", "a/x/seed0", "a/y/seed0", "b/x/seed0"]
             .map(String::from)
             .to_vec();
