@@ -3,6 +3,7 @@
 //! Each cell is its own `train` + `eval` process; the tables are rebuilt from the results
 //! alone (`sweep report`).
 
+pub mod benchmark;
 pub mod exec;
 pub mod plan;
 pub mod slurm;
@@ -344,5 +345,6 @@ fn title(k: TableKind) -> &'static str {
         TableKind::Motion => "Motion per scene (Tab. 2 layout)",
         TableKind::Ablation => "Averaged over scenes (ablation layout, Tabs. 4–7)",
         TableKind::Trade => "Speed / accuracy trade",
+        TableKind::Benchmark => "Per scene and method, with the published rows apart",
     }
 }

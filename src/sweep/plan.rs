@@ -27,7 +27,8 @@ pub struct Plan {
     pub jobs: Option<u32>,
     /// LPIPS weights for `eval` (relative to the plan file); without them LPIPS is n/a.
     pub lpips_weights: Option<PathBuf>,
-    /// Which tables to write: image, motion, ablation, trade [default: all four].
+    /// Which tables to write: image, motion, ablation, trade, benchmark [default: the first
+    /// four].
     pub tables: Option<Vec<TableKind>>,
     /// `train` flags of every cell (a scene's or variant's flag of the same name wins).
     #[serde(default)]
@@ -56,6 +57,9 @@ pub enum TableKind {
     Motion,
     Ablation,
     Trade,
+    /// One row per scene and method with its budget, and the published rows of the same
+    /// scenes apart (D-NeRF; issue 58). Only when a plan asks for it.
+    Benchmark,
 }
 
 impl TableKind {
@@ -66,6 +70,7 @@ impl TableKind {
             Self::Motion => "motion",
             Self::Ablation => "ablation",
             Self::Trade => "trade",
+            Self::Benchmark => "benchmark",
         }
     }
 }

@@ -32,7 +32,7 @@ pub fn stat(values: impl Iterator<Item = Option<f64>>) -> Option<Stat> {
 
 /// A table cell: text, or a statistic shown with `decimals`.
 #[derive(Debug, Clone)]
-enum Val {
+pub(super) enum Val {
     Text(String),
     Num(Option<Stat>, usize),
 }
@@ -41,8 +41,8 @@ enum Val {
 /// separate columns, so a script reads numbers).
 pub struct SweepTable {
     pub kind: TableKind,
-    headers: Vec<String>,
-    rows: Vec<Vec<Val>>,
+    pub(super) headers: Vec<String>,
+    pub(super) rows: Vec<Vec<Val>>,
     /// Lines printed under the Markdown table.
     pub notes: Vec<String>,
 }
@@ -141,7 +141,7 @@ pub struct Grid<'a> {
     results: &'a [CellResult],
 }
 
-type Metric = fn(&CellResult) -> Option<f64>;
+pub(super) type Metric = fn(&CellResult) -> Option<f64>;
 
 const PSNR: (&str, Metric, usize) = ("PSNR", |r| Some(r.psnr), 2);
 const SSIM: (&str, Metric, usize) = ("SSIM", |r| Some(r.ssim), 4);
@@ -162,7 +162,7 @@ impl<'a> Grid<'a> {
         }
     }
 
-    fn cells(&self, scene: &str, variant: &str) -> impl Iterator<Item = &CellResult> {
+    pub(super) fn cells(&self, scene: &str, variant: &str) -> impl Iterator<Item = &CellResult> {
         let (s, v) = (scene.to_string(), variant.to_string());
         self.results
             .iter()
@@ -424,7 +424,13 @@ impl<'a> Grid<'a> {
             TableKind::Motion => self.per_scene(kind, &[MMAP, DRC, DYN]),
             TableKind::Ablation => self.ablation(),
             TableKind::Trade => self.trade(tolerance_db, paper),
+            TableKind::Benchmark => super::benchmark::table(self),
         }
+    }
+
+    /// Which seeds and devices the results come from.
+    pub(super) fn seed_note(&self) -> String {
+        seed_note(self.results)
     }
 
     /// Per scene: every variant's (train seconds, PSNR) as a dot, the frontier as a line.
@@ -475,14 +481,14 @@ impl<'a> Grid<'a> {
 }
 
 /// The `max_resolution` a cell was trained and scored at (0 = as stored).
-fn scored_at(r: &CellResult) -> i64 {
+pub(super) fn scored_at(r: &CellResult) -> i64 {
     r.config
         .get("max_resolution")
         .and_then(serde_json::Value::as_i64)
         .unwrap_or(0)
 }
 
-fn px(res: i64) -> String {
+pub(super) fn px(res: i64) -> String {
     if res == 0 {
         "the stored resolution".into()
     } else {
