@@ -22,6 +22,7 @@ use dispflow_vk::kernels::raster::{Camera, RasterSize, Rasterizer, RenderOpts, G
 /// Floats per 2D gradient record.
 const S: usize = G2D_STRIDE as usize;
 use dispflow_vk::model::gaussians::{GaussianLayout, HostGaussians, Section};
+use dispflow_vk::model::rows::Populations;
 use dispflow_vk::reference::densify::{self as twin, Action, DensifyStats};
 use dispflow_vk::testing::{self, Noise, TestGpu};
 use dispflow_vk::vk::{Buffer, Recorder};
@@ -202,7 +203,8 @@ fn run_densify(
     rec.finish().unwrap();
     let count = b.read_count(gpu).unwrap();
     assert!(count <= s.capacity, "count {count} > budget {}", s.capacity);
-    let dl = |buf| HostGaussians::download(gpu, &layout, buf, count, 0).unwrap();
+    let dl =
+        |buf| HostGaussians::download(gpu, &layout, buf, Populations::split(count, 0)).unwrap();
     GpuOut {
         count,
         actions: b.read_actions(gpu, n).unwrap(),
@@ -401,7 +403,8 @@ fn consecutive_steps_with_swapped_buffers() {
     let b = dens.buffers(&gpu, layout.capacity).unwrap();
     let mut n = n0 as u32;
     for step in 0..2u32 {
-        let dl = |buf| HostGaussians::download(&gpu, &layout, buf, n, 0).unwrap();
+        let dl =
+            |buf| HostGaussians::download(&gpu, &layout, buf, Populations::split(n, 0)).unwrap();
         let (p, m, v) = (dl(&model.params), dl(&model.m), dl(&model.v));
         let stats = random_stats(64 + step as u64, n as usize, layout.capacity as usize);
         upload_stats(&gpu, &b, &stats);
@@ -418,9 +421,17 @@ fn consecutive_steps_with_swapped_buffers() {
         let got = GpuOut {
             count,
             actions: b.read_actions(&gpu, n).unwrap(),
-            params: HostGaussians::download(&gpu, &layout, &model.params_next, count, 0).unwrap(),
-            m: HostGaussians::download(&gpu, &layout, &model.m_next, count, 0).unwrap(),
-            v: HostGaussians::download(&gpu, &layout, &model.v_next, count, 0).unwrap(),
+            params: HostGaussians::download(
+                &gpu,
+                &layout,
+                &model.params_next,
+                Populations::split(count, 0),
+            )
+            .unwrap(),
+            m: HostGaussians::download(&gpu, &layout, &model.m_next, Populations::split(count, 0))
+                .unwrap(),
+            v: HostGaussians::download(&gpu, &layout, &model.v_next, Populations::split(count, 0))
+                .unwrap(),
             stats_after: read_stats(&gpu, &b, layout.capacity as usize),
         };
         compare(&format!("step {step}"), &got, &want, &p);
@@ -876,7 +887,8 @@ fn opacity_reset_matches_twin() {
     rec.finish().unwrap();
     let (mut pw, mut mw, mut vw) = (p.clone(), m.clone(), v.clone());
     twin::opacity_reset(&mut pw, &mut mw, &mut vw);
-    let dl = |buf| HostGaussians::download(&gpu, &layout, buf, n as u32, 0).unwrap();
+    let dl =
+        |buf| HostGaussians::download(&gpu, &layout, buf, Populations::split(n as u32, 0)).unwrap();
     let (pg, mg, vg) = (dl(&model.params), dl(&model.m), dl(&model.v));
     assert_rows_exact("reset params", &pg, &pw, &vec![false; n]);
     assert_rows_exact("reset m", &mg, &mw, &vec![false; n]);

@@ -48,11 +48,11 @@ fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
         assert!(v.loss.is_finite(), "iteration {}: {v:?}", tr.iteration);
         let g = &tr.model.gaussians;
         let host = g.download(&gpu).unwrap();
-        let first = g.deformed() as usize;
-        assert_eq!(host.canonical(), first);
+        let first = g.transient_rows().start as usize;
+        assert_eq!(host.populations(), g.populations());
         // Canonical rows never learn a time (their temporal sections stay exactly 0); every
         // transient has a finite width of its own.
-        if g.transients > 0 {
+        if !g.transient_rows().is_empty() {
             for (i, t) in host.time.iter().enumerate() {
                 if i < first {
                     assert_eq!(
@@ -83,15 +83,15 @@ fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
             }
         }
     }
-    assert!(spawned > 0 && tr.model.gaussians.transients > 0);
+    assert!(spawned > 0 && !tr.model.gaussians.transient_rows().is_empty());
     // A checkpoint with transients restores into a fresh trainer exactly.
     let c = tr.checkpoint().unwrap();
-    assert!(c.model.gaussians.transients > 0);
+    assert!(!c.model.gaussians.transient_rows().is_empty());
     let mut again = Trainer::new(&gpu, &cfg, &ds).unwrap();
     again.restore(&c).unwrap();
     assert_eq!(
-        again.model.gaussians.transients,
-        tr.model.gaussians.transients
+        again.model.gaussians.populations(),
+        tr.model.gaussians.populations()
     );
     assert_eq!(again.checkpoint().unwrap(), c);
     let centre: Vec<f32> = gpu
@@ -129,17 +129,21 @@ fn the_split_covers_the_canonical_rows_and_composes_with_transients() {
         let Some(count) = tr.model.dynamic.split() else {
             continue;
         };
-        assert!(count <= g.deformed(), "{count} dynamic of {}", g.deformed());
+        assert!(
+            count <= g.canonical_rows().len(),
+            "{count} dynamic of {}",
+            g.canonical_rows().len()
+        );
         if count > 0 {
             let idx: Vec<u32> = gpu
                 .read(tr.model.dynamic.idx.elems::<u32>(0, count as u64))
                 .unwrap();
-            let first = g.deformed();
+            let first = g.canonical_rows().len();
             assert!(idx.iter().all(|&i| i < first), "a transient in {idx:?}");
         }
         let f = tr.dynamic_fraction();
         assert!((0.0..=1.0).contains(&f), "{f}");
-        if count > 0 && g.transients > 0 && both.is_none() {
+        if count > 0 && !g.transient_rows().is_empty() && both.is_none() {
             both = Some((tr.checkpoint().unwrap(), Vec::new()));
         }
     }
@@ -149,7 +153,7 @@ fn the_split_covers_the_canonical_rows_and_composes_with_transients() {
     let flags = &c.model.dynamic.as_ref().expect("split").flags;
     assert_eq!(
         flags.len(),
-        g.len() - g.transients,
+        g.canonical_rows().len() as usize,
         "one flag per canonical row"
     );
     // Restored, it steps exactly as the trainer it was taken from (same plan, same split).
@@ -182,7 +186,11 @@ fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full()
             tr.step(false, false).unwrap();
         }
         let (_, s) = tr.last_spawn.clone().unwrap();
-        (s, tr.model.gaussians.n, tr.model.gaussians.transients)
+        (
+            s,
+            tr.model.gaussians.n,
+            tr.model.gaussians.transient_rows().len(),
+        )
     };
     let (s, n, transients) = first_spawn(&c);
     assert!(n < c.densify.budget, "{n} of {}", c.densify.budget);
@@ -344,7 +352,7 @@ fn detached_motion_weights_leave_the_time_gradients_to_the_photometric_render() 
         assert_eq!(tr.plan(1).motion.is_some(), motion_weight > 0.0);
         tr.step(false, false).unwrap();
         let g = &tr.model.gaussians;
-        let first = g.deformed() as usize;
+        let first = g.canonical_rows().len() as usize;
         sections
             .iter()
             .map(|&s| {

@@ -93,7 +93,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     }
     let ply = need("point_cloud.ply")?;
     let mut gaussians = read_ply(&ply)?;
-    if gaussians.transients > 0 {
+    if !gaussians.transient_rows().is_empty() {
         return Err(invalid(
             &ply,
             "holds transient Gaussians; a run writes them to transients.ply",
@@ -103,7 +103,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     let tply = dir.join("transients.ply");
     if tply.is_file() {
         let t = read_ply(&tply)?;
-        if t.sh_coeffs != gaussians.sh_coeffs || t.transients != t.len() {
+        if t.sh_coeffs != gaussians.sh_coeffs || !t.canonical_rows().is_empty() {
             return Err(invalid(
                 &tply,
                 "expected transient Gaussians with point_cloud.ply's SH coefficients",
@@ -177,7 +177,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     let dynamic = if dyn_path.is_file() {
         let b = std::fs::read(&dyn_path).map_err(Error::io(&dyn_path))?;
         // One row per canonical Gaussian (point_cloud.ply's; transients are never split).
-        let canonical = gaussians.canonical();
+        let canonical = gaussians.canonical_rows().len() as usize;
         let want = 4 * DYN_ROW * canonical;
         if b.len() != want {
             return Err(invalid(

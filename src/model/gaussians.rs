@@ -2,6 +2,7 @@
 //! learning rates covers them), their gradients and Adam moments in the same layout, and the
 //! host-side copy used for initialisation, checkpoints and exports.
 
+use super::rows::{Populations, Rows};
 use crate::error::{Error, Result};
 use crate::vk::{BufSlice, Buffer, Gpu};
 
@@ -123,8 +124,8 @@ pub struct HostGaussians {
     pub sh_dc: Vec<[f32; 3]>,
     /// [N, sh_coeffs − 1, 3] flattened per Gaussian.
     pub sh_rest: Vec<f32>,
-    /// The last `transients` rows are transient Gaussians (time-local; see
-    /// `kernels::temporal`); the rows before them the canonical population.
+    /// How many of the rows (the last ones) are transient Gaussians (time-local; see
+    /// `kernels::temporal`); set when building, ask [`HostGaussians::populations`].
     pub transients: usize,
     /// Per row (c, τ): time centre and log temporal width; empty = zeros (no transients).
     pub time: Vec<[f32; 2]>,
@@ -181,9 +182,19 @@ impl HostGaussians {
         })
     }
 
-    /// Rows of the canonical population (the rest are transients).
-    pub fn canonical(&self) -> usize {
-        self.len() - self.transients.min(self.len())
+    /// The rows by population.
+    pub fn populations(&self) -> Populations {
+        Populations::split(self.len() as u32, self.transients.min(self.len()) as u32)
+    }
+
+    /// Rows of the canonical population.
+    pub fn canonical_rows(&self) -> Rows {
+        self.populations().canonical
+    }
+
+    /// Rows of the transient population (after the canonical ones).
+    pub fn transient_rows(&self) -> Rows {
+        self.populations().transient
     }
 
     /// The temporal sections, zeros where empty.
@@ -206,9 +217,10 @@ impl HostGaussians {
     /// Rows `range` as their own Gaussians (transient rows stay transient).
     pub fn rows(&self, range: std::ops::Range<usize>) -> HostGaussians {
         let r = 3 * (self.sh_coeffs as usize).saturating_sub(1);
-        let first_t = self.canonical();
+        let first_t = self.transient_rows().start as usize;
         let (time, vel) = (self.time_or_zeros(), self.velocity_or_zeros());
-        let transients = range.clone().filter(|&i| i >= first_t).count();
+        let transient = range.start.max(first_t)..range.end.max(first_t);
+        let temporal = !transient.is_empty();
         HostGaussians {
             sh_coeffs: self.sh_coeffs,
             means: self.means[range.clone()].to_vec(),
@@ -217,13 +229,13 @@ impl HostGaussians {
             opacity: self.opacity[range.clone()].to_vec(),
             sh_dc: self.sh_dc[range.clone()].to_vec(),
             sh_rest: self.sh_rest[range.start * r..range.end * r].to_vec(),
-            transients,
-            time: if transients > 0 {
+            transients: transient.len(),
+            time: if temporal {
                 time[range.clone()].to_vec()
             } else {
                 Vec::new()
             },
-            velocity: if transients > 0 {
+            velocity: if temporal {
                 vel[range].to_vec()
             } else {
                 Vec::new()
@@ -233,8 +245,11 @@ impl HostGaussians {
 
     /// The canonical rows and the transient rows.
     pub fn split_transients(&self) -> (HostGaussians, HostGaussians) {
-        let c = self.canonical();
-        (self.rows(0..c), self.rows(c..self.len()))
+        let p = self.populations();
+        (
+            self.rows(p.canonical.range()),
+            self.rows(p.transient.range()),
+        )
     }
 
     /// `other`'s rows appended after these (transients stay last: `other`'s canonical rows
@@ -242,7 +257,7 @@ impl HostGaussians {
     pub fn append(&mut self, other: &HostGaussians) {
         assert_eq!(self.sh_coeffs, other.sh_coeffs, "append: SH layouts differ");
         assert!(
-            self.transients == 0 || other.transients == other.len(),
+            self.transient_rows().is_empty() || other.canonical_rows().is_empty(),
             "append: canonical rows after transients"
         );
         let (time, vel) = (self.time_or_zeros(), self.velocity_or_zeros());
@@ -303,15 +318,16 @@ impl HostGaussians {
         Ok(())
     }
 
-    /// Reads rows 0..n of `buf`, the last `transients` of them transients (their temporal
-    /// sections are read only when there are any).
+    /// Reads the live rows `rows` of `buf` (the transients' temporal sections are read only
+    /// when there are any).
     pub fn download(
         gpu: &Gpu,
         layout: &GaussianLayout,
         buf: &Buffer,
-        n: u32,
-        transients: u32,
+        rows: Populations,
     ) -> Result<Self> {
+        let n = rows.len();
+        let temporal = !rows.transient.is_empty();
         if n == 0 {
             return Ok(HostGaussians {
                 sh_coeffs: layout.sh_coeffs,
@@ -330,15 +346,15 @@ impl HostGaussians {
             } else {
                 Vec::new()
             },
-            transients: transients.min(n) as usize,
-            time: if transients > 0 {
+            transients: rows.transient.len() as usize,
+            time: if temporal {
                 let c: Vec<f32> = gpu.read(layout.slice(buf, Section::TimeCentre, n))?;
                 let tau: Vec<f32> = gpu.read(layout.slice(buf, Section::TimeLogWidth, n))?;
                 c.into_iter().zip(tau).map(|(a, b)| [a, b]).collect()
             } else {
                 Vec::new()
             },
-            velocity: if transients > 0 {
+            velocity: if temporal {
                 gpu.read(layout.slice(buf, Section::Velocity, n))?
             } else {
                 Vec::new()

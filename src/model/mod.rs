@@ -6,4 +6,5 @@ pub mod dynamic;
 pub mod gaussians;
 pub mod nodes;
 pub mod optim;
+pub mod rows;
 pub mod state;

@@ -7,6 +7,7 @@ use super::deform::{MlpConfig, MlpLayout, TimeEncoding};
 use super::dynamic::{DynamicSet, SplitSnapshot};
 use super::gaussians::{GaussianLayout, HostGaussians, Section};
 use super::nodes::{NodeSnapshot, NodeState};
+use super::rows::{Populations, Rows};
 use crate::error::{Error, Result};
 use crate::kernels::deform::Canonical;
 use crate::kernels::raster::SplatInputs;
@@ -17,9 +18,9 @@ pub struct GaussianState {
     pub layout: GaussianLayout,
     /// Live Gaussians.
     pub n: u32,
-    /// The last `transients` live rows are transient (time-local) Gaussians; rows
-    /// `0..n − transients` are the canonical population the deformation moves.
-    pub transients: u32,
+    /// How many of the live rows (the last ones) are transient; ask
+    /// [`GaussianState::populations`].
+    transients: u32,
     pub params: Buffer,
     pub grads: Buffer,
     pub m: Buffer,
@@ -45,7 +46,7 @@ impl GaussianState {
         let s = GaussianState {
             layout,
             n: init.len() as u32,
-            transients: init.transients as u32,
+            transients: init.transient_rows().len(),
             params: mk("gaussian params")?,
             grads: mk("gaussian grads")?,
             m: mk("gaussian adam m")?,
@@ -76,15 +77,25 @@ impl GaussianState {
         self.transients = transients.min(n);
     }
 
-    /// Rows of the canonical population (what the deformation runs over).
-    pub fn deformed(&self) -> u32 {
-        self.n - self.transients.min(self.n)
+    /// The live rows by population.
+    pub fn populations(&self) -> Populations {
+        Populations::split(self.n, self.transients)
     }
 
-    /// Appends `g` (transients: `g.transients == g.len()`) after the live rows, with zero
+    /// Rows of the canonical population (what the deformation runs over).
+    pub fn canonical_rows(&self) -> Rows {
+        self.populations().canonical
+    }
+
+    /// Rows of the transient population.
+    pub fn transient_rows(&self) -> Rows {
+        self.populations().transient
+    }
+
+    /// Appends `g` (all transient: `g.transient_rows()` covers it) after the live rows, with zero
     /// Adam moments. The caller keeps the densification statistics of the new rows at zero.
     pub fn append_transients(&mut self, gpu: &Gpu, g: &HostGaussians) -> Result<()> {
-        if g.transients != g.len() {
+        if !g.populations().canonical.is_empty() {
             return Err(Error::Invalid(
                 "append_transients: only transient rows can be appended".into(),
             ));
@@ -153,7 +164,7 @@ impl GaussianState {
     }
 
     pub fn download(&self, gpu: &Gpu) -> Result<HostGaussians> {
-        HostGaussians::download(gpu, &self.layout, &self.params, self.n, self.transients)
+        HostGaussians::download(gpu, &self.layout, &self.params, self.populations())
     }
 
     /// Replaces the live Gaussians by `g` (parameters only; moments untouched).
@@ -173,7 +184,7 @@ impl GaussianState {
         }
         g.upload(gpu, &self.layout, &self.params)?;
         self.n = g.len() as u32;
-        self.transients = g.transients as u32;
+        self.transients = g.transient_rows().len();
         Ok(())
     }
 }
@@ -409,7 +420,7 @@ pub fn gaussian_blobs<'a>(prefix: &str, g: &'a HostGaussians, non_negative: bool
     ]
     .into_iter()
     .chain(
-        (g.transients > 0 && g.time.len() == g.len())
+        (!g.transient_rows().is_empty() && g.time.len() == g.len())
             .then(|| {
                 [
                     ("time", g.time.as_flattened(), 2),
@@ -484,12 +495,12 @@ impl Model {
         Ok(ModelSnapshot {
             shape: self.shape(),
             gaussians: g.download(gpu)?,
-            gauss_m: HostGaussians::download(gpu, &g.layout, &g.m, g.n, g.transients)?,
-            gauss_v: HostGaussians::download(gpu, &g.layout, &g.v, g.n, g.transients)?,
+            gauss_m: HostGaussians::download(gpu, &g.layout, &g.m, g.populations())?,
+            gauss_v: HostGaussians::download(gpu, &g.layout, &g.v, g.populations())?,
             mlp_params: gpu.read(d.params.all())?,
             mlp_m: gpu.read(d.m.all())?,
             mlp_v: gpu.read(d.v.all())?,
-            dynamic: self.dynamic.download(gpu, g.deformed())?,
+            dynamic: self.dynamic.download(gpu, g.canonical_rows().len())?,
             nodes: match &self.nodes {
                 Some(n) if n.placed() => Some(n.download(gpu, g.n)?),
                 _ => None,
@@ -581,8 +592,8 @@ impl Model {
         }
         if let Some(d) = &s.dynamic {
             // The split covers the canonical rows (transients never go through D).
-            let c = s.gaussians.canonical();
-            if d.flags.len() != c {
+            let c = s.gaussians.canonical_rows().len();
+            if d.flags.len() != c as usize {
                 return mismatch(format!(
                     "blob dynamic: {} flags; {c} canonical Gaussians need {c}",
                     d.flags.len()

@@ -24,6 +24,7 @@ use crate::kernels::nodes::NO_NODE;
 use crate::model::dynamic::SplitSnapshot;
 use crate::model::gaussians::HostGaussians;
 use crate::model::nodes::NodeSnapshot;
+use crate::model::rows::Populations;
 use crate::model::state::{ModelShape, ModelSnapshot};
 
 const MAGIC: &[u8; 8] = b"DFVKCKPT";
@@ -139,8 +140,9 @@ fn take_gauss(
             &format!("header: {transients} transients among {n} Gaussians"),
         ));
     }
+    let rows = Populations::split(n as u32, transients);
     let (mut time, mut velocity) = (Vec::new(), Vec::new());
-    if transients > 0 {
+    if !rows.transient.is_empty() {
         for (k, row) in [("time", 2), ("velocity", 3)] {
             let v = m
                 .remove(&format!("{prefix}{k}"))
@@ -169,7 +171,7 @@ fn take_gauss(
         opacity,
         sh_dc: arr::<3>(sh_dc),
         sh_rest,
-        transients: transients as usize,
+        transients: rows.transient.len() as usize,
         time,
         velocity,
     })
@@ -243,7 +245,7 @@ impl Checkpoint {
             sh_coeffs: self.model.gaussians.sh_coeffs,
             shape: self.model.shape,
             deform_lr_scale: self.deform_lr_scale,
-            transients: self.model.gaussians.transients as u32,
+            transients: self.model.gaussians.transient_rows().len(),
             blobs: blobs
                 .iter()
                 .map(|(k, v)| BlobEntry {
@@ -379,7 +381,7 @@ impl Checkpoint {
             return Err(bad(path, "MLP moments disagree with the parameter count"));
         }
         // The split covers the canonical rows only (transients never go through D).
-        let c = gaussians.canonical();
+        let c = gaussians.canonical_rows().len() as usize;
         let fixed = m.remove("dynamic_fixed");
         let dynamic = match m.remove("dynamic") {
             None => None,
@@ -518,12 +520,13 @@ pub fn is_kept_checkpoint(p: &Path) -> bool {
 /// Gaussians (all of `g`'s rows must then be transients) add t_centre, t_log_width and vx, vy,
 /// vz: a run writes them apart, to `transients.ply`.
 pub fn write_ply(path: &Path, g: &HostGaussians) -> Result<()> {
-    let temporal = g.transients > 0;
-    if temporal && g.transients != g.len() {
+    let rows = g.populations();
+    let temporal = !rows.transient.is_empty();
+    if temporal && !rows.canonical.is_empty() {
         return Err(Error::Invalid(format!(
             "{}: a PLY holds canonical or transient Gaussians, not both ({} of {} transient)",
             path.display(),
-            g.transients,
+            rows.transient.len(),
             g.len()
         )));
     }

@@ -517,7 +517,8 @@ impl<'g> Trainer<'g> {
     /// factors at its time: the culled ones cost nothing after the temporal stage).
     fn rows_drawn(&self, p: &StepPlan) -> Result<cost::Rows> {
         let g = &self.model.gaussians;
-        let canonical = g.deformed();
+        let rows = g.populations();
+        let canonical = rows.canonical.len();
         let deforming = match p.deform_active {
             true => self
                 .model
@@ -527,10 +528,10 @@ impl<'g> Trainer<'g> {
                 .min(canonical),
             false => 0,
         };
-        let alive = match self.passes.as_ref().filter(|_| g.transients > 0) {
+        let alive = match self.passes.as_ref().filter(|_| !rows.transient.is_empty()) {
             Some(s) => {
                 // The transient rows only (a canonical row's factor is 1).
-                let w = s.deform.opacity_scale(Slot::T1, canonical, g.transients);
+                let w = s.deform.opacity_scale(Slot::T1, rows.transient);
                 let w: Vec<f32> = self.gpu.read(w)?;
                 w.iter().filter(|&&w| w > 0.0).count() as u32
             }
@@ -540,14 +541,16 @@ impl<'g> Trainer<'g> {
             still: canonical - deforming,
             deforming,
             alive,
-            transients: g.transients,
+            transients: rows.transient.len(),
         })
     }
 
     /// Fraction of the canonical Gaussians the deformation runs over (1 while dense;
     /// transients never go through it).
     pub fn dynamic_fraction(&self) -> f64 {
-        self.model.dynamic.fraction(self.model.gaussians.deformed())
+        self.model
+            .dynamic
+            .fraction(self.model.gaussians.canonical_rows().len())
     }
 
     /// How the model is drawn now: the deformation and SH degree of the last iteration.

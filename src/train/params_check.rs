@@ -122,7 +122,7 @@ impl ParamCheck {
     fn count(&self, tr: &Trainer<'_>) -> Result<Vec<NonFinite>> {
         let gpu = tr.gpu;
         let g = &tr.model.gaussians;
-        let first_transient = g.n - g.transients.min(g.n);
+        let first_transient = g.transient_rows().start;
         let mut rec = crate::vk::Recorder::new(gpu)?;
         self.check.reset(&mut rec);
         for (k, &s) in Section::ALL.iter().enumerate() {

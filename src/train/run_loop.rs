@@ -272,7 +272,7 @@ pub(super) fn train_loop(
             if message {
                 let transients = if transients_on {
                     let alive = l.rows.map_or(0, |r| r.alive);
-                    let held = tr.model.gaussians.transients;
+                    let held = tr.model.gaussians.transient_rows().len();
                     format!(" ({held} transient, {alive} alive at this step)")
                 } else {
                     String::new()
@@ -311,7 +311,7 @@ pub(super) fn train_loop(
                 motion_gt_px: probe.and_then(|p| p.gt_px),
                 motion_p50_px: probe.and_then(|p| p.p50_px),
                 motion_p99_px: probe.and_then(|p| p.p99_px),
-                transients: transients_on.then_some(tr.model.gaussians.transients),
+                transients: transients_on.then_some(tr.model.gaussians.transient_rows().len()),
                 probe_psnr: level.map(|l| l.0),
                 probe_fall_db: level.map(|l| l.1),
                 worst_psnr: worst.as_ref().map(|w| w.0),

@@ -287,8 +287,8 @@ fn finish(
     metrics.background_reason = background_reason;
     if cfg.transient.mode == super::config::TransientMode::On {
         let g = &tr.model.gaussians;
-        metrics.gaussians_canonical = Some(g.deformed());
-        metrics.gaussians_transient = Some(g.transients);
+        metrics.gaussians_canonical = Some(g.canonical_rows().len());
+        metrics.gaussians_transient = Some(g.transient_rows().len());
     }
     // None when no step ran (a resumed run that had already finished).
     metrics.ms_per_step =
@@ -359,7 +359,7 @@ fn write_model_files(gpu: &Gpu, tr: &mut Trainer<'_>, out: &Path) -> Result<()> 
     match tr
         .model
         .dynamic
-        .download(gpu, tr.model.gaussians.deformed())?
+        .download(gpu, tr.model.gaussians.canonical_rows().len())?
     {
         Some(d) => write_atomic(&dynamic_bin, &super::outputs::dynamic_bin(&d))?,
         None if dynamic_bin.is_file() => {

@@ -75,7 +75,7 @@ pub fn record_step(
         background: p.background,
         alpha_max: ALPHA_MAX,
         abs_grad: p.abs_grad,
-        detach_feature_weights: p.detach_motion_weights && g.transients > 0,
+        detach_feature_weights: p.detach_motion_weights && !g.transient_rows().is_empty(),
     };
     rec.set_zone("deform");
     s.deform

@@ -8,7 +8,7 @@
 //! and a static Gaussian's δ is exactly 0), and the backward gathers
 //! the output gradients of the same rows. The dense path is the code that ran before.
 //!
-//! The model's transient Gaussians (its last rows, `model.gaussians.transients`) are not
+//! The model's transient Gaussians (its last rows, `model.gaussians.transient_rows()`) are not
 //! deformed: the MLP, the nodes and the composition run over the canonical rows only, and the
 //! temporal stage (`kernels::temporal`) draws the transient rows at the slot's time and writes
 //! every row's opacity factor (1 for canonical rows), which the slot's splats carry.
@@ -26,6 +26,7 @@ use crate::kernels::temporal::{Temporal, TemporalGrads, TemporalInputs, Temporal
 use crate::model::deform::MlpConfig;
 use crate::model::gaussians::Section;
 use crate::model::nodes::{FieldConfig, NodeState};
+use crate::model::rows::Rows;
 use crate::model::state::Model;
 use crate::vk::{BufSlice, Buffer, Gpu, Recorder};
 
@@ -157,7 +158,7 @@ impl DeformPass {
             return;
         };
         let (g, d) = (&model.gaussians, &model.dynamic);
-        let n = g.deformed();
+        let n = g.canonical_rows().len();
         if ns.knn_for.get() == Some((n, d.generation())) {
             return;
         }
@@ -176,7 +177,7 @@ impl DeformPass {
             return;
         }
         f.pairs_for.set(epoch);
-        let n = model.gaussians.deformed();
+        let n = model.gaussians.canonical_rows().len();
         (f.kernels).record_pairs(rec, &f.bufs, ns.knn_rows(n), n, ns.m);
     }
 
@@ -185,7 +186,7 @@ impl DeformPass {
         BlendInputs {
             m: ns.m,
             k: ns.cfg.knn,
-            knn: ns.knn_rows(g.deformed()),
+            knn: ns.knn_rows(g.canonical_rows().len()),
             means: g.param(Section::Means),
             quats: g.param(Section::Quats),
             nodes: ns.param_block(),
@@ -199,7 +200,7 @@ impl DeformPass {
     fn nodes_forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32) {
         let (f, ns) = self.node_field(model).expect("nodes field");
         let (g, s, dynamic) = (&model.gaussians, self.slot(k), &model.dynamic);
-        let n = g.deformed();
+        let n = g.canonical_rows().len();
         if !ns.placed() {
             rec.fill(s.out.slice(0, n.max(1) as u64 * row::DEFORM * 4), 0);
             return;
@@ -247,7 +248,7 @@ impl DeformPass {
             return;
         }
         let (rows, d_out, idx) = match dynamic.split() {
-            None => (g.deformed(), self.output_grad(k), None),
+            None => (g.canonical_rows().len(), self.output_grad(k), None),
             Some(count) => {
                 let c = s.compact_d_out.as_ref().expect("a backward pass").all();
                 let width = row::DEFORM as u32;
@@ -297,7 +298,7 @@ impl DeformPass {
         let params = model.deform.params.all();
         let Some(count) = dynamic.split() else {
             let time = MlpTime::Batch(t);
-            let n = g.deformed();
+            let n = g.canonical_rows().len();
             self.mlp
                 .forward(rec, &s.mlp, n, means, time, params, s.out.all());
             return;
@@ -311,8 +312,15 @@ impl DeformPass {
         }
         let (row_of, out, fixed) = (dynamic.row_of(), s.compact_out.all(), dynamic.fixed());
         let width = row::DEFORM as u32;
-        self.rows
-            .expand(rec, g.deformed(), width, row_of, out, fixed, s.out.all());
+        self.rows.expand(
+            rec,
+            g.canonical_rows().len(),
+            width,
+            row_of,
+            out,
+            fixed,
+            s.out.all(),
+        );
     }
 
     /// The temporal stage's settings at time `t` (δ from `t` to `t2`).
@@ -320,7 +328,7 @@ impl DeformPass {
         let (g, tr) = (&model.gaussians, model.transient);
         TemporalParams {
             n: g.n,
-            first: g.deformed(),
+            first: g.transient_rows().start,
             t,
             log_floor: tr.log_floor,
             cutoff: tr.cutoff,
@@ -348,11 +356,12 @@ impl DeformPass {
         let (g, s) = (&model.gaussians, self.slot(k));
         let d = deformed.then(|| s.out.all());
         let drawn = drawn_of(&s.drawn);
-        if g.deformed() > 0 {
-            self.apply
-                .forward(rec, g.deformed(), &g.canonical(), d, &drawn);
+        let canonical = g.canonical_rows();
+        if !canonical.is_empty() {
+            let n = canonical.len();
+            (self.apply).forward(rec, n, &g.canonical(), d, &drawn);
         }
-        if g.transients > 0 {
+        if !g.transient_rows().is_empty() {
             let p = Self::temporal_params(model, t, t);
             let x = Self::temporal_inputs(model);
             self.temporal.forward(rec, &p, &x, &drawn, s.op_scale.all());
@@ -362,7 +371,7 @@ impl DeformPass {
     /// The model at time `t` into slot `k`: D(·, t) when `deformed` (else D ≡ 0, the
     /// warm-up) and the transients at `t`.
     pub fn forward(&self, rec: &mut Recorder<'_>, model: &Model, k: Slot, t: f32, deformed: bool) {
-        if deformed && model.gaussians.deformed() > 0 {
+        if deformed && !model.gaussians.canonical_rows().is_empty() {
             self.mlp_forward(rec, model, k, t);
         }
         self.apply(rec, model, k, t, deformed);
@@ -373,15 +382,14 @@ impl DeformPass {
     pub fn splats<'a>(&'a self, model: &'a Model, k: Slot, sh_degree: u32) -> SplatInputs<'a> {
         let g = &model.gaussians;
         SplatInputs {
-            opacity_scale: (g.transients > 0).then(|| self.slot(k).op_scale.all()),
+            opacity_scale: (!g.transient_rows().is_empty()).then(|| self.slot(k).op_scale.all()),
             ..g.splats(self.drawn(k), sh_degree)
         }
     }
 
-    /// The opacity factors of slot `k`, rows `first..first + count` (meaningful only with
-    /// transients).
-    pub fn opacity_scale(&self, k: Slot, first: u32, count: u32) -> BufSlice<'_> {
-        (self.slot(k).op_scale).elems::<f32>(first as u64, count as u64)
+    /// The opacity factors of slot `k` over `rows` (meaningful only with transients).
+    pub fn opacity_scale(&self, k: Slot, rows: Rows) -> BufSlice<'_> {
+        (self.slot(k).op_scale).elems::<f32>(rows.start as u64, rows.len() as u64)
     }
 
     /// DispFlow's δ of the transient rows, v·(t2 − t1), over the deformation's rows of `delta`.
@@ -392,7 +400,7 @@ impl DeformPass {
         (t1, t2): (f32, f32),
         delta: BufSlice<'_>,
     ) {
-        if model.gaussians.transients == 0 {
+        if model.gaussians.transient_rows().is_empty() {
             return;
         }
         let p = Self::temporal_params(model, t1, t2);
@@ -408,7 +416,7 @@ impl DeformPass {
         (t1, t2): (f32, f32),
         d_delta: BufSlice<'_>,
     ) {
-        if model.gaussians.transients == 0 {
+        if model.gaussians.transient_rows().is_empty() {
             return;
         }
         let p = Self::temporal_params(model, t1, t2);
@@ -434,11 +442,12 @@ impl DeformPass {
         let g = &model.gaussians;
         let d_out = deformed.then(|| self.output_grad(k));
         let grads = g.canonical_grads();
-        if g.deformed() > 0 {
-            self.apply
-                .backward(rec, g.deformed(), &g.canonical(), d_drawn, &grads, d_out);
+        let canonical = g.canonical_rows();
+        if !canonical.is_empty() {
+            let n = canonical.len();
+            (self.apply).backward(rec, n, &g.canonical(), d_drawn, &grads, d_out);
         }
-        if g.transients > 0 {
+        if !g.transient_rows().is_empty() {
             let p = Self::temporal_params(model, t, t);
             let x = Self::temporal_inputs(model);
             let tg = TemporalGrads {
@@ -467,9 +476,10 @@ impl DeformPass {
         let grads = g.canonical_grads();
         let d_out = self.output_grad(k);
         // Transients learn from the photometric render only (their rows are left alone).
-        if g.deformed() > 0 {
-            self.apply
-                .backward_add(rec, g.deformed(), &g.canonical(), d_drawn, &grads, d_out);
+        let canonical = g.canonical_rows();
+        if !canonical.is_empty() {
+            let n = canonical.len();
+            (self.apply).backward_add(rec, n, &g.canonical(), d_drawn, &grads, d_out);
         }
     }
 
@@ -487,14 +497,14 @@ impl DeformPass {
         let (d, s, dynamic) = (&model.deform, self.slot(k), &model.dynamic);
         let (params, grads) = (d.params.all(), d.grads.all());
         let (rows, d_out) = match dynamic.split() {
-            None if model.gaussians.deformed() == 0 => {
+            None if model.gaussians.canonical_rows().is_empty() => {
                 // Transients only: the MLP had no input, its gradient is zero.
                 if !accumulate {
                     rec.fill(grads, 0);
                 }
                 return;
             }
-            None => (model.gaussians.deformed(), self.output_grad(k)),
+            None => (model.gaussians.canonical_rows().len(), self.output_grad(k)),
             Some(0) => {
                 // Nothing is dynamic: the MLP had no input, its gradient is zero.
                 if !accumulate {

@@ -53,17 +53,17 @@ impl AdamPass {
         if l.sh_coeffs > 1 {
             groups.push(group(Section::ShRest, lr.sh_rest));
         }
-        if g.transients > 0 {
+        let transient = g.transient_rows();
+        if !transient.is_empty() {
             // The temporal sections learn on the transient rows only.
-            let first = g.deformed();
             for (s, rate) in [
                 (Section::TimeCentre, lr.centre),
                 (Section::TimeLogWidth, lr.log_width),
                 (Section::Velocity, lr.velocity),
             ] {
                 groups.push(AdamGroup {
-                    first: (l.offset(s) + first as u64 * l.row_len(s) as u64) as u32,
-                    count: g.transients * l.row_len(s),
+                    first: (l.offset(s) + transient.start as u64 * l.row_len(s) as u64) as u32,
+                    count: transient.len() * l.row_len(s),
                     lr: rate as f32,
                     mask: None,
                 });
@@ -188,7 +188,7 @@ impl DensifyPass {
     ) -> Result<()> {
         let d = &self.cfg;
         // Growth stops where it would eat into the transients' free share.
-        let reserve = self.transient_share.saturating_sub(g.transients);
+        let reserve = (self.transient_share).saturating_sub(g.transient_rows().len());
         let mut s = DensifySettings::new(self.extent, d.budget.saturating_sub(reserve).max(g.n));
         s.grad_threshold = d.grad_threshold;
         s.percent_dense = d.percent_dense;
@@ -214,8 +214,9 @@ impl DensifyPass {
             m: &g.next[1],
             v: &g.next[2],
         };
-        let first = g.deformed();
-        let prune = (g.transients > 0).then(|| {
+        let rows = g.transient_rows();
+        let first = rows.start;
+        let prune = (!rows.is_empty()).then(|| {
             let p = TemporalParams {
                 n: g.n,
                 first,
@@ -272,7 +273,7 @@ impl DensifyPass {
             v: &g.v,
         };
         self.densifier
-            .record_opacity_reset(&mut rec, b, g.deformed());
+            .record_opacity_reset(&mut rec, b, g.canonical_rows().len());
         rec.finish()?;
         Ok(())
     }

@@ -128,7 +128,7 @@ impl Classifier {
         model: &mut Model,
         deform: &DeformPass,
     ) -> Result<SplitStats> {
-        let n = model.gaussians.deformed();
+        let n = model.gaussians.canonical_rows().len();
         if n == 0 {
             model.dynamic.set_split(0);
             return Ok(SplitStats::default());

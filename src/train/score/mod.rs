@@ -22,6 +22,7 @@ use crate::kernels::motion::{MotionNorm, NormBuffers, NormConfig};
 use crate::kernels::raster::{Camera, Rasterizer, RenderOpts};
 use crate::model::deform::MlpConfig;
 use crate::model::gaussians::HostGaussians;
+use crate::model::rows::Rows;
 use crate::model::state::Model;
 use crate::train::frames::GpuFrame;
 use crate::train::passes::{
@@ -252,7 +253,7 @@ impl Evaluator {
     ) -> Result<Vec<f32>> {
         let g = &model.gaussians;
         let n = g.n as usize;
-        let mut flags = match model.dynamic.download(gpu, g.deformed())? {
+        let mut flags = match model.dynamic.download(gpu, g.canonical_rows().len())? {
             Some(s) => s.flags,
             None => vec![1; n],
         };
@@ -380,10 +381,11 @@ impl Evaluator {
                 }
             })
             .collect();
-        if model.gaussians.transients > 0 {
+        if !model.gaussians.transient_rows().is_empty() {
             // Transients as they are at `t`: opacity times the temporal weight, culled ones
             // dropped (a standard model of that instant has no time).
-            let w: Vec<f32> = gpu.read(self.deform.opacity_scale(Slot::T1, 0, n as u32))?;
+            let w: Vec<f32> =
+                gpu.read(self.deform.opacity_scale(Slot::T1, Rows::new(0, n as u32)))?;
             let keep: Vec<usize> = (0..n).filter(|&i| w[i] > 0.0).collect();
             let r = 3 * (g.sh_coeffs as usize - 1);
             let sig = |l: f32| 1.0 / (1.0 + (-l).exp());
