@@ -345,7 +345,7 @@ pub struct TransientConfig {
     /// a floater in every other view.
     pub depths: u32,
     /// Temporal neighbours each side (0: off) whose residuals a wrong pixel is tracked through
-    /// (`train::track`): a pixel whose residual a point moving at a constant velocity explains
+    /// (`train::transients::track`): a pixel whose residual a point moving at a constant velocity explains
     /// in them spawns one transient there, with that velocity, instead of `depths` still ones.
     pub track: u32,
     /// Mean absolute RGB error (colours in [0, 1]) a pixel needs to spawn transients.

@@ -21,11 +21,11 @@ pub mod outputs;
 pub mod params_check;
 pub mod passes;
 pub mod plan;
+pub mod run;
 mod run_loop;
 pub mod score;
 pub mod session;
 pub mod step;
-pub mod track;
 pub mod transients;
 
 use std::rc::Rc;
@@ -56,14 +56,9 @@ use passes::{
 use passes::{SceneSignal, Slot};
 use plan::{Decomposition, FrameTimes, StepPlan};
 use step::StepPasses;
-use track::{Residual, Tracker};
 
 /// A training frame's render and its ground truth, [H·W] RGBA each.
 type Shot = (Vec<[f32; 4]>, Vec<[f32; 4]>);
-
-/// The farthest a tracked transient may move per frame spacing, as a share of the scene
-/// bounds' diagonal (a hypothesis faster than that is a false match across the scene).
-const MAX_STEP_OF_BOUNDS: f32 = 0.25;
 
 /// Numbers reported per logged step.
 #[derive(Clone, Debug, Default)]
@@ -112,9 +107,9 @@ pub struct Trainer<'g> {
     /// and the signal render on it (training's own background is the plan's).
     pub background: [f32; 3],
     /// The last spawn of transients and its iteration.
-    pub last_spawn: Option<(u32, transients::SpawnReport)>,
+    pub last_spawn: Option<(u32, transients::spawn::SpawnReport)>,
     /// Which frames spawns looked at and what they saw.
-    looks: transients::Looks,
+    looks: transients::spawn::Looks,
 }
 
 /// The temporal stage's constants for training frames `train`: σ's floor in time units
@@ -365,125 +360,6 @@ impl<'g> Trainer<'g> {
         if p.opacity_reset {
             d.reset_opacity(self.gpu, &self.model.gaussians)?;
         }
-        Ok(())
-    }
-
-    /// Spawns transients from the frames with the lowest PSNR at their last step (see
-    /// `transients`), into any free row of the budget.
-    pub fn spawn_transients(&mut self) -> Result<()> {
-        let started = std::time::Instant::now();
-        let tc = self.cfg.transient;
-        let g = &self.model.gaussians;
-        let cap = g.layout.capacity as usize;
-        // The share is the transients' reservation, not their ceiling: the canonical
-        // population never grows into it, and rows it leaves free are the transients' too
-        // (densification already grows them into those).
-        let room = cap - g.n as usize;
-        let mut report = transients::SpawnReport::default();
-        if room == 0 {
-            // Nothing could be added: skip the renders and the tracking.
-            self.looks.skip();
-            report.full = true;
-            report.ms = started.elapsed().as_secs_f64() * 1e3;
-            self.last_spawn = Some((self.iteration, report));
-            return Ok(());
-        }
-        let mut all = HostGaussians {
-            sh_coeffs: g.layout.sh_coeffs,
-            ..Default::default()
-        };
-        let view = self.view();
-        let spacing = self.times.spacing;
-        // Candidates spread over the frames the time curriculum trains now (one it has not
-        // reached yet is wrong because it is untrained, not because the canonical model cannot
-        // draw it), rotating each spawn, rendered; those with the largest localized residual
-        // spawn.
-        let window = self.times.window(&self.cfg, self.iteration.max(1));
-        let cands = self
-            .looks
-            .candidates(window, 3 * tc.frames as usize, tc.persist);
-        let mut shots = Vec::new();
-        for &i in &cands {
-            let Some((render, gt)) = self.shot(i, view)? else {
-                continue;
-            };
-            let r = transients::local_residual(&render, &gt, tc.min_error);
-            shots.push((r, i, render, gt));
-        }
-        report.looked_at = shots.len();
-        shots.retain(|s| match self.looks.judge(s.1, s.0, tc.persist) {
-            transients::Verdict::Spawn => true,
-            transients::Verdict::FirstLook => {
-                report.first_looks += 1;
-                false
-            }
-            transients::Verdict::Improving => {
-                report.improving += 1;
-                false
-            }
-        });
-        shots.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        shots.truncate(tc.frames as usize);
-        shots.retain(|s| s.0 > 0.0);
-        // Tracking reads the spawning frames' temporal neighbours too.
-        let mut near = std::collections::BTreeMap::new();
-        for s in &shots {
-            for j in self.times.neighbours(s.1, tc.track as usize) {
-                if let std::collections::btree_map::Entry::Vacant(e) = near.entry(j) {
-                    if let Some(shot) = self.shot(j, view)? {
-                        e.insert(shot);
-                    }
-                }
-            }
-        }
-        let diag = (self.bounds.max - self.bounds.min).length();
-        let v_max = MAX_STEP_OF_BOUNDS * diag / spacing.max(1e-9);
-        for (r, i, render, gt) in &shots {
-            let f = &self.frames[*i];
-            let tracker = (tc.track > 0).then(|| {
-                let nb = self
-                    .times
-                    .neighbours(*i, tc.track as usize)
-                    .into_iter()
-                    .filter_map(|j| {
-                        let (rj, gj) = near.get(&j)?;
-                        let fj = &self.frames[j];
-                        Some(Residual::new(&fj.camera, fj.time, rj, gj, tc.min_error))
-                    })
-                    .collect();
-                let me = Residual::new(&f.camera, f.time, render, gt, tc.min_error);
-                Tracker::new(me, nb, v_max, &self.bounds)
-            });
-            let sf = transients::SpawnFrame {
-                camera: &f.camera,
-                time: f.time,
-                render,
-                gt,
-            };
-            let left = room - all.len();
-            let sh = self.model.gaussians.layout.sh_coeffs;
-            let (t, fs) = transients::transients_of(
-                &sf,
-                &tc,
-                &self.bounds,
-                spacing,
-                sh,
-                left,
-                tracker.as_ref(),
-            );
-            report.frames.push((f.id.clone(), *r, fs.picked));
-            report.tracked += fs.tracked;
-            report.over_budget += fs.over;
-            all.append(&t);
-        }
-        report.spawned = all.len();
-        let first = self.model.gaussians.n;
-        self.model.gaussians.append_transients(self.gpu, &all)?;
-        if let Some(s) = self.passes.as_ref() {
-            s.densify.clear_stats(self.gpu, first, all.len() as u32)?;
-        }
-        report.ms = started.elapsed().as_secs_f64() * 1e3;
-        self.last_spawn = Some((self.iteration, report));
         Ok(())
     }
 

@@ -9,7 +9,7 @@ use std::time::Instant;
 use super::collapse::{CollapseEvent, PruneEvent, SAME_PLACE_ROLLBACKS};
 use super::guard::CollapseGuard;
 use super::outputs::{truncate_log, LogLine};
-use super::session::{Progress, RunSpec};
+use super::run::{Progress, RunSpec};
 use super::Trainer;
 use crate::error::{Error, Result};
 

@@ -2,7 +2,7 @@
 //! directory and a progress sink in; the run's outputs written and its [`Report`] out. The
 //! `train` command only parses flags around it; `sweep` runs it as `train` processes.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use super::checkpoint::{last_checkpoint, write_atomic, write_ply, Checkpoint};
 use super::collapse::RunStatus;
@@ -10,37 +10,13 @@ use super::config::TrainConfig;
 use super::outputs::frame_png;
 use super::outputs::{last_wall_s, remove_stale_outputs, truncate_log};
 use super::outputs::{save_side_by_side, write_dynamic_masks};
+pub use super::run::{Progress, RunSpec};
 use super::run_loop::{train_loop, LoopStats, RunLog};
 use super::Trainer;
 use crate::data;
 use crate::error::{Error, Result};
 use crate::train::metrics::{mean, Report, ReportContext};
 use crate::vk::Gpu;
-
-/// What one training run needs besides the device.
-#[derive(Clone)]
-pub struct RunSpec<'a> {
-    pub cfg: &'a TrainConfig,
-    pub data_dir: PathBuf,
-    /// The scene's name in the report (by default the dataset directory's name).
-    pub scene: String,
-    pub out: PathBuf,
-    /// Continue from `out/checkpoints/last.ckpt` when it exists.
-    pub resume: bool,
-    /// A per-kernel GPU time breakdown at every log line.
-    pub verbose: bool,
-}
-
-/// Where a run reports its progress.
-pub trait Progress {
-    fn start(&mut self, total: u32, at: u32);
-    fn position(&mut self, iteration: u32);
-    /// The status line of a logged iteration.
-    fn message(&mut self, iteration: u32, total: u32, msg: &str);
-    /// An event worth a line of its own (device, resume, splits, collapses, warnings).
-    fn note(&mut self, text: &str);
-    fn finish(&mut self);
-}
 
 /// The CLI's progress: a bar with ETA on a terminal, one line per logged iteration otherwise.
 pub struct Bar {

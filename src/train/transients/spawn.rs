@@ -9,6 +9,9 @@
 //! wrong-depth transient fits one view, not the several cameras of its lifetime, and is
 //! pruned), centred at the frame's time with σ = `init_frames` frame spacings, no velocity.
 
+use super::ray::{pixel_ray, ray_box};
+use super::residual::worst_pixels;
+use super::track::{Track, Tracker};
 use crate::data::Bounds;
 use crate::kernels::raster::Camera;
 use crate::model::gaussians::{inverse_sigmoid, rgb_to_sh_dc, HostGaussians};
@@ -22,7 +25,7 @@ pub struct SpawnReport {
     pub looked_at: usize,
     /// Transients added.
     pub spawned: usize,
-    /// Pixels tracked (each one transient with a velocity; `train::track`).
+    /// Pixels tracked (each one transient with a velocity; [`super::track`]).
     pub tracked: usize,
     /// Pixels over the error threshold that the budget left out.
     pub over_budget: usize,
@@ -153,113 +156,6 @@ pub fn persists(now: f64, last: Option<f64>, persist: f32) -> bool {
     last.is_some_and(|l| now >= persist as f64 * l)
 }
 
-/// The localized residual of a render: the summed error of the pixels that [`worst_pixels`]
-/// would spawn from (0 when the frame is wrong everywhere alike, or right everywhere).
-pub fn local_residual(render: &[[f32; 4]], gt: &[[f32; 4]], min_error: f32) -> f64 {
-    let err = pixel_errors(render, gt);
-    let thr = threshold(&err, min_error);
-    err.iter().filter(|&&e| e >= thr).map(|&e| e as f64).sum()
-}
-
-/// The error a pixel needs to spawn: at least `min_error` and [`RELATIVE_ERROR`] times the
-/// frame's median.
-pub(crate) fn threshold(err: &[f32], min_error: f32) -> f32 {
-    min_error.max(RELATIVE_ERROR * median(err))
-}
-
-pub(crate) fn pixel_errors(render: &[[f32; 4]], gt: &[[f32; 4]]) -> Vec<f32> {
-    render
-        .iter()
-        .zip(gt)
-        .map(|(r, g)| ((r[0] - g[0]).abs() + (r[1] - g[1]).abs() + (r[2] - g[2]).abs()) / 3.0)
-        .collect()
-}
-
-fn median(v: &[f32]) -> f32 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let mut s = v.to_vec();
-    let m = s.len() / 2;
-    *s.select_nth_unstable_by(m, f32::total_cmp).1
-}
-
-/// How much worse than the frame's median error a pixel must be to spawn: a transient is for
-/// a local failure (an object missing, ghosted, misplaced), not for a view the model gets wrong
-/// everywhere.
-pub const RELATIVE_ERROR: f32 = 3.0;
-
-/// Pixels whose mean absolute RGB error is at least `min_error` and [`RELATIVE_ERROR`] times
-/// the frame's median, at most one per `cell`×`cell` block (its worst), the `k` worst of those;
-/// and the side of the cells. `render`, `gt`: [H·W] RGBA.
-pub fn worst_pixels(
-    render: &[[f32; 4]],
-    gt: &[[f32; 4]],
-    width: u32,
-    height: u32,
-    min_error: f32,
-    k: usize,
-) -> (Vec<(u32, u32, f32)>, u32) {
-    let err = pixel_errors(render, gt);
-    let min_error = threshold(&err, min_error);
-    let over = err.iter().filter(|&&e| e >= min_error).count();
-    if over == 0 || k == 0 {
-        return (Vec::new(), 1);
-    }
-    // Cells sized so the region holds about k of them: the picks spread over all of it.
-    let cell = ((over as f64 / k as f64).sqrt().ceil() as u32).max(1);
-    let (cw, ch) = (width.div_ceil(cell), height.div_ceil(cell));
-    let mut best: Vec<Option<(u32, u32, f32)>> = vec![None; (cw * ch) as usize];
-    for y in 0..height {
-        for x in 0..width {
-            let e = err[(y * width + x) as usize];
-            if e.is_nan() || e < min_error {
-                continue;
-            }
-            let c = &mut best[((y / cell) * cw + x / cell) as usize];
-            if c.map_or(true, |b| e > b.2) {
-                *c = Some((x, y, e));
-            }
-        }
-    }
-    let mut picks: Vec<(u32, u32, f32)> = best.into_iter().flatten().collect();
-    picks.sort_by(|a, b| b.2.total_cmp(&a.2).then((a.1, a.0).cmp(&(b.1, b.0))));
-    picks.truncate(k);
-    (picks, cell)
-}
-
-/// The ray through pixel centre `(x + 0.5, y + 0.5)`: origin (the camera centre) and direction
-/// scaled so that the parameter is the camera depth z.
-pub fn pixel_ray(cam: &Camera, x: u32, y: u32) -> ([f32; 3], [f32; 3]) {
-    let c = cam.centre();
-    let d_cam = [
-        (x as f32 + 0.5 - cam.cx) / cam.fx,
-        (y as f32 + 0.5 - cam.cy) / cam.fy,
-        1.0,
-    ];
-    // Rows of `rot` are the camera axes in world coordinates: d = rotᵀ·d_cam.
-    let d = std::array::from_fn(|a| (0..3).map(|r| cam.rot[r][a] * d_cam[r]).sum());
-    ([c[0] as f32, c[1] as f32, c[2] as f32], d)
-}
-
-/// The depths along ray `(o, d)` inside `b` (slab test), from at least `near`: `(z0, z1)`.
-pub fn ray_box(o: [f32; 3], d: [f32; 3], b: &Bounds, near: f32) -> Option<(f32, f32)> {
-    let (mut lo, mut hi) = (near, f32::INFINITY);
-    let (bmin, bmax) = (b.min.to_array(), b.max.to_array());
-    for a in 0..3 {
-        if d[a].abs() < 1e-12 {
-            if o[a] < bmin[a] || o[a] > bmax[a] {
-                return None;
-            }
-            continue;
-        }
-        let (t0, t1) = ((bmin[a] - o[a]) / d[a], (bmax[a] - o[a]) / d[a]);
-        lo = lo.max(t0.min(t1));
-        hi = hi.min(t0.max(t1));
-    }
-    (lo < hi && hi.is_finite()).then_some((lo, hi))
-}
-
 /// Everything a spawn needs about one frame.
 pub struct SpawnFrame<'a> {
     pub camera: &'a Camera,
@@ -281,7 +177,7 @@ pub struct FrameSpawn {
 
 /// The transients of one frame: up to `room` of them (the rest counted as over budget).
 /// `spacing`: the training frames' time spacing. With a `tracker` over the frame's temporal
-/// neighbours (`train::track`), a pixel it tracks spawns one transient on its track, with its
+/// neighbours ([`super::track`]), a pixel it tracks spawns one transient on its track, with its
 /// velocity; the others spawn at `depths` depths, still.
 pub fn transients_of(
     f: &SpawnFrame<'_>,
@@ -290,7 +186,7 @@ pub fn transients_of(
     spacing: f32,
     sh_coeffs: u32,
     room: usize,
-    tracker: Option<&crate::train::track::Tracker<'_>>,
+    tracker: Option<&Tracker<'_>>,
 ) -> (HostGaussians, FrameSpawn) {
     let cam = f.camera;
     let (px, cell) = worst_pixels(
@@ -327,7 +223,7 @@ pub fn transients_of(
         g.velocity.push(v);
     };
     // Tracking is the spawn's cost (a grid of hypotheses per pixel): the pixels in parallel.
-    let tracks: Vec<Option<crate::train::track::Track>> = match tracker {
+    let tracks: Vec<Option<Track>> = match tracker {
         Some(tr) => {
             use rayon::prelude::*;
             px.par_iter().map(|&(x, y, _)| tr.track(x, y)).collect()
@@ -384,17 +280,6 @@ mod tests {
         );
         assert_eq!(candidate_frames(&by_time, 20, 0).len(), 12);
         assert!(candidate_frames(&[], 4, 0).is_empty());
-    }
-
-    #[test]
-    fn the_residual_is_local() {
-        let gt = vec![[0.0f32; 4]; 100];
-        let mut r = gt.clone();
-        r[7] = [0.9; 4];
-        r[8] = [0.6; 4];
-        assert!((local_residual(&r, &gt, 0.1) - 1.5).abs() < 1e-6);
-        // Wrong everywhere alike: nothing local.
-        assert_eq!(local_residual(&vec![[0.5f32; 4]; 100], &gt, 0.1), 0.0);
     }
 
     #[test]
@@ -476,75 +361,5 @@ mod tests {
             "64 transients from r_003 (residual 12.5, 64 px) of 12 frames looked at; \
              5 improving frames left to training; 41 ms"
         );
-    }
-
-    #[test]
-    fn worst_pixels_spread_over_the_wrong_region() {
-        let (w, h) = (16u32, 8u32);
-        let gt = vec![[0.0f32; 4]; (w * h) as usize];
-        let mut r = gt.clone();
-        // A wrong 8×4 block, error growing with x.
-        for y in 2..6 {
-            for x in 4..12 {
-                r[(y * w + x) as usize] = [0.2 + 0.01 * x as f32; 4];
-            }
-        }
-        let (p, cell) = worst_pixels(&r, &gt, w, h, 0.1, 8);
-        assert_eq!(cell, 2, "32 pixels over the threshold, 8 picks: 2×2 cells");
-        assert_eq!(p.len(), 8);
-        assert!(p
-            .iter()
-            .all(|&(x, y, _)| (4..12).contains(&x) && (2..6).contains(&y)));
-        // No two picks in one cell, worst first.
-        for (i, a) in p.iter().enumerate() {
-            for b in &p[i + 1..] {
-                assert!((a.0 / 2, a.1 / 2) != (b.0 / 2, b.1 / 2));
-            }
-        }
-        assert!(p.windows(2).all(|w| w[0].2 >= w[1].2));
-        assert!(worst_pixels(&gt, &gt, w, h, 0.1, 8).0.is_empty());
-        // Wrong everywhere: nothing stands out of the frame's median, nothing spawns.
-        let all = vec![[0.5f32; 4]; (w * h) as usize];
-        assert!(worst_pixels(&all, &gt, w, h, 0.1, 8).0.is_empty());
-    }
-
-    #[test]
-    fn a_pixel_ray_back_projects_to_its_pixel_inside_the_box() {
-        let cam = Camera {
-            rot: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-            trans: [0.0, 0.0, 5.0],
-            fx: 50.0,
-            fy: 50.0,
-            cx: 32.0,
-            cy: 32.0,
-            width: 64,
-            height: 64,
-            near: 0.01,
-        };
-        let b = Bounds {
-            min: glam::Vec3::splat(-1.0),
-            max: glam::Vec3::splat(1.0),
-        };
-        let (o, d) = pixel_ray(&cam, 31, 31);
-        let (z0, z1) = ray_box(o, d, &b, 0.01).expect("hits the box");
-        assert!(
-            (z0 - 4.0).abs() < 1e-4 && (z1 - 6.0).abs() < 1e-4,
-            "{z0} {z1}"
-        );
-        // A slanted ray leaves through a side: y = −1 at depth 1/(11.5/50) from the centre.
-        let (o, d) = pixel_ray(&cam, 40, 20);
-        let (z0, z1) = ray_box(o, d, &b, 0.01).expect("hits the box");
-        assert!(
-            (z0 - 4.0).abs() < 1e-4 && (z1 - 50.0 / 11.5).abs() < 1e-4,
-            "{z0} {z1}"
-        );
-        let p: [f32; 3] = std::array::from_fn(|a| o[a] + d[a] * 5.0);
-        let q: [f32; 3] = std::array::from_fn(|r| {
-            (0..3).map(|a| cam.rot[r][a] * p[a]).sum::<f32>() + cam.trans[r]
-        });
-        let (u, v) = (cam.fx * q[0] / q[2] + cam.cx, cam.fy * q[1] / q[2] + cam.cy);
-        assert!((u - 40.5).abs() < 1e-3 && (v - 20.5).abs() < 1e-3 && (q[2] - 5.0).abs() < 1e-4);
-        // A ray that misses the box.
-        assert!(ray_box(o, [0.0, 1.0, 0.0], &b, 0.01).is_none());
     }
 }

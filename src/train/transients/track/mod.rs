@@ -15,9 +15,10 @@
 //! leave a moving point's depth free when the camera's path is nearly straight; the slowest
 //! track is taken then ([`SPEED_COST`], [`solve::solve_slowest`]).
 
+use super::ray::{pixel_ray, ray_box};
+use super::residual::{pixel_errors, threshold};
 use crate::data::Bounds;
 use crate::kernels::raster::Camera;
-use crate::train::transients::{pixel_errors, pixel_ray, ray_box, threshold};
 
 mod solve;
 
@@ -87,7 +88,7 @@ pub struct Residual<'a> {
     pub camera: &'a Camera,
     pub time: f32,
     pub gt: &'a [[f32; 4]],
-    /// Per pixel: wrong enough to spawn (the same rule as `transients::worst_pixels`).
+    /// Per pixel: wrong enough to spawn (the same rule as `super::residual::worst_pixels`).
     pub hot: Vec<bool>,
 }
 

@@ -1,0 +1,124 @@
+//! Which pixels of a render are wrong enough to spawn from: the per-pixel error, the
+//! threshold (at least `min_error` and [`RELATIVE_ERROR`] times the frame's median) and the
+//! frame's localized residual. Spawning and the tracker apply the same rule.
+
+/// The localized residual of a render: the summed error of the pixels that [`worst_pixels`]
+/// would spawn from (0 when the frame is wrong everywhere alike, or right everywhere).
+pub fn local_residual(render: &[[f32; 4]], gt: &[[f32; 4]], min_error: f32) -> f64 {
+    let err = pixel_errors(render, gt);
+    let thr = threshold(&err, min_error);
+    err.iter().filter(|&&e| e >= thr).map(|&e| e as f64).sum()
+}
+
+/// The error a pixel needs to spawn: at least `min_error` and [`RELATIVE_ERROR`] times the
+/// frame's median.
+pub fn threshold(err: &[f32], min_error: f32) -> f32 {
+    min_error.max(RELATIVE_ERROR * median(err))
+}
+
+pub fn pixel_errors(render: &[[f32; 4]], gt: &[[f32; 4]]) -> Vec<f32> {
+    render
+        .iter()
+        .zip(gt)
+        .map(|(r, g)| ((r[0] - g[0]).abs() + (r[1] - g[1]).abs() + (r[2] - g[2]).abs()) / 3.0)
+        .collect()
+}
+
+fn median(v: &[f32]) -> f32 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s = v.to_vec();
+    let m = s.len() / 2;
+    *s.select_nth_unstable_by(m, f32::total_cmp).1
+}
+
+/// How much worse than the frame's median error a pixel must be to spawn: a transient is for
+/// a local failure (an object missing, ghosted, misplaced), not for a view the model gets wrong
+/// everywhere.
+pub const RELATIVE_ERROR: f32 = 3.0;
+
+/// Pixels whose mean absolute RGB error is at least `min_error` and [`RELATIVE_ERROR`] times
+/// the frame's median, at most one per `cell`×`cell` block (its worst), the `k` worst of those;
+/// and the side of the cells. `render`, `gt`: [H·W] RGBA.
+pub fn worst_pixels(
+    render: &[[f32; 4]],
+    gt: &[[f32; 4]],
+    width: u32,
+    height: u32,
+    min_error: f32,
+    k: usize,
+) -> (Vec<(u32, u32, f32)>, u32) {
+    let err = pixel_errors(render, gt);
+    let min_error = threshold(&err, min_error);
+    let over = err.iter().filter(|&&e| e >= min_error).count();
+    if over == 0 || k == 0 {
+        return (Vec::new(), 1);
+    }
+    // Cells sized so the region holds about k of them: the picks spread over all of it.
+    let cell = ((over as f64 / k as f64).sqrt().ceil() as u32).max(1);
+    let (cw, ch) = (width.div_ceil(cell), height.div_ceil(cell));
+    let mut best: Vec<Option<(u32, u32, f32)>> = vec![None; (cw * ch) as usize];
+    for y in 0..height {
+        for x in 0..width {
+            let e = err[(y * width + x) as usize];
+            if e.is_nan() || e < min_error {
+                continue;
+            }
+            let c = &mut best[((y / cell) * cw + x / cell) as usize];
+            if c.map_or(true, |b| e > b.2) {
+                *c = Some((x, y, e));
+            }
+        }
+    }
+    let mut picks: Vec<(u32, u32, f32)> = best.into_iter().flatten().collect();
+    picks.sort_by(|a, b| b.2.total_cmp(&a.2).then((a.1, a.0).cmp(&(b.1, b.0))));
+    picks.truncate(k);
+    (picks, cell)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_residual_is_local() {
+        let gt = vec![[0.0f32; 4]; 100];
+        let mut r = gt.clone();
+        r[7] = [0.9; 4];
+        r[8] = [0.6; 4];
+        assert!((local_residual(&r, &gt, 0.1) - 1.5).abs() < 1e-6);
+        // Wrong everywhere alike: nothing local.
+        assert_eq!(local_residual(&vec![[0.5f32; 4]; 100], &gt, 0.1), 0.0);
+    }
+
+    #[test]
+    fn worst_pixels_spread_over_the_wrong_region() {
+        let (w, h) = (16u32, 8u32);
+        let gt = vec![[0.0f32; 4]; (w * h) as usize];
+        let mut r = gt.clone();
+        // A wrong 8×4 block, error growing with x.
+        for y in 2..6 {
+            for x in 4..12 {
+                r[(y * w + x) as usize] = [0.2 + 0.01 * x as f32; 4];
+            }
+        }
+        let (p, cell) = worst_pixels(&r, &gt, w, h, 0.1, 8);
+        assert_eq!(cell, 2, "32 pixels over the threshold, 8 picks: 2×2 cells");
+        assert_eq!(p.len(), 8);
+        assert!(p
+            .iter()
+            .all(|&(x, y, _)| (4..12).contains(&x) && (2..6).contains(&y)));
+        // No two picks in one cell, worst first.
+        for (i, a) in p.iter().enumerate() {
+            for b in &p[i + 1..] {
+                assert!((a.0 / 2, a.1 / 2) != (b.0 / 2, b.1 / 2));
+            }
+        }
+        assert!(p.windows(2).all(|w| w[0].2 >= w[1].2));
+        assert!(worst_pixels(&gt, &gt, w, h, 0.1, 8).0.is_empty());
+        // Wrong everywhere: nothing stands out of the frame's median, nothing spawns.
+        let all = vec![[0.5f32; 4]; (w * h) as usize];
+        assert!(worst_pixels(&all, &gt, w, h, 0.1, 8).0.is_empty());
+    }
+}
