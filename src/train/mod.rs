@@ -21,6 +21,7 @@ pub mod outputs;
 pub mod params_check;
 pub mod passes;
 pub mod plan;
+pub mod population;
 pub mod run;
 mod run_loop;
 pub mod score;

@@ -6,12 +6,13 @@ use super::render::RenderPass;
 use crate::error::Result;
 use crate::kernels::adam::{Adam, AdamBuffers, AdamGroup};
 use crate::kernels::densify::{Densifier, DensifyBuffers, DensifySettings, GaussianBuffers};
-use crate::kernels::temporal::{Temporal, TemporalParams};
+use crate::kernels::temporal::Temporal;
 use crate::model::gaussians::Section;
 use crate::model::optim::AdamHyper;
 use crate::model::state::{GaussianState, Model, TransientShape};
 use crate::train::config::DensifyConfig;
 use crate::train::plan::StepLr;
+use crate::train::population::{reserved_rows, Population};
 use crate::vk::{BufSlice, Gpu, Recorder};
 
 pub struct AdamPass {
@@ -53,21 +54,8 @@ impl AdamPass {
         if l.sh_coeffs > 1 {
             groups.push(group(Section::ShRest, lr.sh_rest));
         }
-        let transient = g.transient_rows();
-        if !transient.is_empty() {
-            // The temporal sections learn on the transient rows only.
-            for (s, rate) in [
-                (Section::TimeCentre, lr.centre),
-                (Section::TimeLogWidth, lr.log_width),
-                (Section::Velocity, lr.velocity),
-            ] {
-                groups.push(AdamGroup {
-                    first: (l.offset(s) + transient.start as u64 * l.row_len(s) as u64) as u32,
-                    count: transient.len() * l.row_len(s),
-                    lr: rate as f32,
-                    mask: None,
-                });
-            }
+        for p in Population::of(g) {
+            groups.extend(p.own_groups(l, lr));
         }
         groups.retain(|g| g.count > 0);
         let bufs = AdamBuffers {
@@ -188,7 +176,7 @@ impl DensifyPass {
     ) -> Result<()> {
         let d = &self.cfg;
         // Growth stops where it would eat into the transients' free share.
-        let reserve = (self.transient_share).saturating_sub(g.transient_rows().len());
+        let reserve = reserved_rows(self.transient_share, g);
         let mut s = DensifySettings::new(self.extent, d.budget.saturating_sub(reserve).max(g.n));
         s.grad_threshold = d.grad_threshold;
         s.percent_dense = d.percent_dense;
@@ -214,27 +202,11 @@ impl DensifyPass {
             m: &g.next[1],
             v: &g.next[2],
         };
-        let rows = g.transient_rows();
-        let first = rows.start;
-        let prune = (!rows.is_empty()).then(|| {
-            let p = TemporalParams {
-                n: g.n,
-                first,
-                log_floor: transient.log_floor,
-                cutoff: transient.cutoff,
-                t_lo: transient.t_range[0],
-                t_hi: transient.t_range[1],
-                ..Default::default()
-            };
-            let out = self.peak.slice(0, g.n.max(1) as u64 * 4);
-            let (l, c, w) = (
-                g.param(Section::Opacity),
-                g.param(Section::TimeCentre),
-                g.param(Section::TimeLogWidth),
-            );
-            self.temporal.peak(&mut rec, &p, l, c, w, out);
-            out
-        });
+        let first = g.transient_rows().start;
+        let out = self.peak.slice(0, g.n.max(1) as u64 * 4);
+        let prune = Population::of(g)
+            .iter()
+            .find_map(|p| p.record_prune_logits(&mut rec, g, (&self.temporal, transient), out));
         self.densifier
             .record_densify_pruning(&mut rec, &self.bufs, src, dst, g.n, &s, prune)?;
         rec.finish()?;
@@ -272,8 +244,11 @@ impl DensifyPass {
             m: &g.m,
             v: &g.v,
         };
-        self.densifier
-            .record_opacity_reset(&mut rec, b, g.canonical_rows().len());
+        for p in Population::of(g).iter().filter(|p| p.resets_opacity()) {
+            debug_assert_eq!(p.rows().start, 0, "the reset runs over rows 0..count");
+            self.densifier
+                .record_opacity_reset(&mut rec, b, p.rows().len());
+        }
         rec.finish()?;
         Ok(())
     }
