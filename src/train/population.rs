@@ -2,9 +2,10 @@
 //! the passes ask instead of testing whether the model has transients. The storage keeps the
 //! canonical rows first and the transient rows last ([`crate::model::rows`]).
 //!
-//! This cut owns the optimiser's side: the sections only a population learns (its Adam
-//! groups), the budget rows it keeps in reserve, what densification prunes it by, and whether
-//! the opacity reset touches it. The forward/backward arms (`passes::deform`), spawning
+//! This cut owns the optimiser's side (the sections only a population learns — its Adam
+//! groups —, the budget rows it keeps in reserve, what densification prunes it by, whether
+//! the opacity reset touches it) and what a population adds to the forward/backward
+//! (`passes::deform`: an opacity factor per slot, δ by a learnt velocity). Spawning
 //! (`train::transients`) and save/load still test the rows themselves.
 
 use crate::kernels::adam::AdamGroup;
@@ -90,6 +91,21 @@ impl Population {
         );
         temporal.peak(rec, &p, l, c, w, out);
         Some(out)
+    }
+
+    /// Whether the forward scales these rows' opacity by a per-slot factor (the transients'
+    /// temporal weight at the slot's time), which the slot's splats then carry.
+    pub fn scales_opacity(&self) -> bool {
+        matches!(self, Population::Transient(_))
+    }
+
+    /// The rows DispFlow's δ moves by a learnt velocity, v·(t2 − t1) (the transients'), or
+    /// `None` when the deformation's output is their δ.
+    pub fn velocity_rows(&self) -> Option<Rows> {
+        match *self {
+            Population::Transient(r) => Some(r),
+            Population::Canonical(_) => None,
+        }
     }
 
     /// Whether 3DGS's periodic opacity reset applies to these rows.

@@ -28,6 +28,7 @@ use crate::model::gaussians::Section;
 use crate::model::nodes::{FieldConfig, NodeState};
 use crate::model::rows::Rows;
 use crate::model::state::Model;
+use crate::train::population::Population;
 use crate::vk::{BufSlice, Buffer, Gpu, Recorder};
 
 /// A time slot of the pass.
@@ -324,11 +325,11 @@ impl DeformPass {
     }
 
     /// The temporal stage's settings at time `t` (δ from `t` to `t2`).
-    fn temporal_params(model: &Model, t: f32, t2: f32) -> TemporalParams {
+    fn temporal_params(model: &Model, rows: Rows, t: f32, t2: f32) -> TemporalParams {
         let (g, tr) = (&model.gaussians, model.transient);
         TemporalParams {
             n: g.n,
-            first: g.transient_rows().start,
+            first: rows.start,
             t,
             log_floor: tr.log_floor,
             cutoff: tr.cutoff,
@@ -356,15 +357,18 @@ impl DeformPass {
         let (g, s) = (&model.gaussians, self.slot(k));
         let d = deformed.then(|| s.out.all());
         let drawn = drawn_of(&s.drawn);
-        let canonical = g.canonical_rows();
-        if !canonical.is_empty() {
-            let n = canonical.len();
-            (self.apply).forward(rec, n, &g.canonical(), d, &drawn);
-        }
-        if !g.transient_rows().is_empty() {
-            let p = Self::temporal_params(model, t, t);
-            let x = Self::temporal_inputs(model);
-            self.temporal.forward(rec, &p, &x, &drawn, s.op_scale.all());
+        for pop in Population::of(g) {
+            match pop {
+                Population::Canonical(r) if !r.is_empty() => {
+                    (self.apply).forward(rec, r.len(), &g.canonical(), d, &drawn);
+                }
+                Population::Canonical(_) => {}
+                Population::Transient(r) => {
+                    let p = Self::temporal_params(model, r, t, t);
+                    let x = Self::temporal_inputs(model);
+                    self.temporal.forward(rec, &p, &x, &drawn, s.op_scale.all());
+                }
+            }
         }
     }
 
@@ -382,7 +386,8 @@ impl DeformPass {
     pub fn splats<'a>(&'a self, model: &'a Model, k: Slot, sh_degree: u32) -> SplatInputs<'a> {
         let g = &model.gaussians;
         SplatInputs {
-            opacity_scale: (!g.transient_rows().is_empty()).then(|| self.slot(k).op_scale.all()),
+            opacity_scale: (Population::of(g).iter().any(Population::scales_opacity))
+                .then(|| self.slot(k).op_scale.all()),
             ..g.splats(self.drawn(k), sh_degree)
         }
     }
@@ -400,12 +405,14 @@ impl DeformPass {
         (t1, t2): (f32, f32),
         delta: BufSlice<'_>,
     ) {
-        if model.gaussians.transient_rows().is_empty() {
-            return;
+        for r in Population::of(&model.gaussians)
+            .iter()
+            .filter_map(Population::velocity_rows)
+        {
+            let p = Self::temporal_params(model, r, t1, t2);
+            let v = model.gaussians.param(Section::Velocity);
+            self.temporal.displacement(rec, &p, v, delta);
         }
-        let p = Self::temporal_params(model, t1, t2);
-        let v = model.gaussians.param(Section::Velocity);
-        self.temporal.displacement(rec, &p, v, delta);
     }
 
     /// ∂L/∂δ of the transient rows into their velocity gradient (after [`Self::backward`]).
@@ -416,12 +423,14 @@ impl DeformPass {
         (t1, t2): (f32, f32),
         d_delta: BufSlice<'_>,
     ) {
-        if model.gaussians.transient_rows().is_empty() {
-            return;
+        for r in Population::of(&model.gaussians)
+            .iter()
+            .filter_map(Population::velocity_rows)
+        {
+            let p = Self::temporal_params(model, r, t1, t2);
+            let gv = model.gaussians.grad(Section::Velocity);
+            self.temporal.displacement_backward(rec, &p, d_delta, gv);
         }
-        let p = Self::temporal_params(model, t1, t2);
-        let gv = model.gaussians.grad(Section::Velocity);
-        self.temporal.displacement_backward(rec, &p, d_delta, gv);
     }
 
     /// Gradients wrt slot `k`'s drawn geometry → the canonical means/log-scales/quaternion
@@ -442,24 +451,28 @@ impl DeformPass {
         let g = &model.gaussians;
         let d_out = deformed.then(|| self.output_grad(k));
         let grads = g.canonical_grads();
-        let canonical = g.canonical_rows();
-        if !canonical.is_empty() {
-            let n = canonical.len();
-            (self.apply).backward(rec, n, &g.canonical(), d_drawn, &grads, d_out);
-        }
-        if !g.transient_rows().is_empty() {
-            let p = Self::temporal_params(model, t, t);
-            let x = Self::temporal_inputs(model);
-            let tg = TemporalGrads {
-                means: grads.means,
-                log_scales: grads.log_scales,
-                quats: grads.quats,
-                centre: g.grad(Section::TimeCentre),
-                log_width: g.grad(Section::TimeLogWidth),
-                velocity: g.grad(Section::Velocity),
-            };
-            self.temporal
-                .backward(rec, &p, &x, d_drawn, d_op_scale, &tg);
+        for pop in Population::of(g) {
+            match pop {
+                Population::Canonical(r) if !r.is_empty() => {
+                    let c = g.canonical();
+                    (self.apply).backward(rec, r.len(), &c, d_drawn, &grads, d_out);
+                }
+                Population::Canonical(_) => {}
+                Population::Transient(r) => {
+                    let p = Self::temporal_params(model, r, t, t);
+                    let x = Self::temporal_inputs(model);
+                    let tg = TemporalGrads {
+                        means: grads.means,
+                        log_scales: grads.log_scales,
+                        quats: grads.quats,
+                        centre: g.grad(Section::TimeCentre),
+                        log_width: g.grad(Section::TimeLogWidth),
+                        velocity: g.grad(Section::Velocity),
+                    };
+                    self.temporal
+                        .backward(rec, &p, &x, d_drawn, d_op_scale, &tg);
+                }
+            }
         }
     }
 
