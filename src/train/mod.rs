@@ -56,6 +56,7 @@ use passes::{
 };
 use passes::{SceneSignal, Slot};
 use plan::{Decomposition, FrameTimes, StepPlan};
+use population::Population;
 use step::StepPasses;
 
 /// A training frame's render and its ground truth, [H·W] RGBA each.
@@ -405,15 +406,17 @@ impl<'g> Trainer<'g> {
                 .min(canonical),
             false => 0,
         };
-        let alive = match self.passes.as_ref().filter(|_| !rows.transient.is_empty()) {
-            Some(s) => {
-                // The transient rows only (a canonical row's factor is 1).
-                let w = s.deform.opacity_scale(Slot::T1, rows.transient);
-                let w: Vec<f32> = self.gpu.read(w)?;
-                w.iter().filter(|&&w| w > 0.0).count() as u32
+        let mut alive = 0;
+        if let Some(s) = self.passes.as_ref() {
+            // The rows with an opacity factor (every other row's is 1) whose factor is not 0.
+            let scaled = Population::of(g)
+                .into_iter()
+                .filter(Population::scales_opacity);
+            for r in scaled.map(|p| p.rows()) {
+                let w: Vec<f32> = self.gpu.read(s.deform.opacity_scale(Slot::T1, r))?;
+                alive += w.iter().filter(|&&w| w > 0.0).count() as u32;
             }
-            None => 0,
-        };
+        }
         Ok(cost::Rows {
             still: canonical - deforming,
             deforming,

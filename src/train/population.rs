@@ -99,6 +99,12 @@ impl Population {
         matches!(self, Population::Transient(_))
     }
 
+    /// Whether any population of `g` scales its opacity per slot (the slot's splats then
+    /// carry the factors, and a frozen model of one instant drops the rows they cull).
+    pub fn any_scales_opacity(g: &GaussianState) -> bool {
+        Population::of(g).iter().any(Population::scales_opacity)
+    }
+
     /// The rows DispFlow's δ moves by a learnt velocity, v·(t2 − t1) (the transients'), or
     /// `None` when the deformation's output is their δ.
     pub fn velocity_rows(&self) -> Option<Rows> {

@@ -8,6 +8,7 @@ use super::passes::{
     AdamPass, DeformPass, DensifyPass, MotionTerm, OverflowWatch, PhotoLoss, RenderPass, Slot,
 };
 use super::plan::StepPlan;
+use super::population::Population;
 use crate::kernels::raster::{OutputGrads, RenderOpts, SplatInputs};
 use crate::model::state::Model;
 use crate::vk::Recorder;
@@ -75,7 +76,7 @@ pub fn record_step(
         background: p.background,
         alpha_max: ALPHA_MAX,
         abs_grad: p.abs_grad,
-        detach_feature_weights: p.detach_motion_weights && !g.transient_rows().is_empty(),
+        detach_feature_weights: p.detach_motion_weights && Population::any_scales_opacity(g),
     };
     rec.set_zone("deform");
     s.deform

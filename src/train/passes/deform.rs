@@ -386,8 +386,7 @@ impl DeformPass {
     pub fn splats<'a>(&'a self, model: &'a Model, k: Slot, sh_degree: u32) -> SplatInputs<'a> {
         let g = &model.gaussians;
         SplatInputs {
-            opacity_scale: (Population::of(g).iter().any(Population::scales_opacity))
-                .then(|| self.slot(k).op_scale.all()),
+            opacity_scale: Population::any_scales_opacity(g).then(|| self.slot(k).op_scale.all()),
             ..g.splats(self.drawn(k), sh_degree)
         }
     }

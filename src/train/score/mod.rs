@@ -28,6 +28,7 @@ use crate::train::frames::GpuFrame;
 use crate::train::passes::{
     row, DeformPass, OverflowWatch, PhotoLoss, RenderPass, Slot, StepSizes,
 };
+use crate::train::population::Population;
 use crate::train::step::ALPHA_MAX;
 use crate::vk::{BufSlice, Buffer, Gpu, Recorder};
 
@@ -381,7 +382,7 @@ impl Evaluator {
                 }
             })
             .collect();
-        if !model.gaussians.transient_rows().is_empty() {
+        if Population::any_scales_opacity(&model.gaussians) {
             // Transients as they are at `t`: opacity times the temporal weight, culled ones
             // dropped (a standard model of that instant has no time).
             let w: Vec<f32> =
