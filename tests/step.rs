@@ -695,7 +695,7 @@ mod gpu_step {
                 .unwrap(),
             ),
             adam: AdamPass::new(gpu).unwrap(),
-            densify: DensifyPass::new(gpu, densify, 0, 1.0, 0).unwrap(),
+            densify: DensifyPass::new(gpu, densify, Default::default(), 1.0, 0).unwrap(),
             watch: OverflowWatch::new(gpu, "test overflow", 2).unwrap(),
             classifier: None,
         };

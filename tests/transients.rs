@@ -11,6 +11,7 @@ use dispflow_vk::bench::step::make_quarter_transient;
 use dispflow_vk::model::gaussians::Section;
 use dispflow_vk::testing;
 use dispflow_vk::train::config::{MotionWeights, SparsityMode, TrainConfig, TransientMode};
+use dispflow_vk::train::population::Reserve;
 use dispflow_vk::train::Trainer;
 use train_common::{tiny_config, tiny_dataset, tiny_scene};
 
@@ -42,6 +43,7 @@ fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
     let cfg = cfg();
     let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
     let mut spawned = 0;
+    let mut born = None;
     while tr.iteration < cfg.iterations {
         tr.step(false, false).unwrap();
         let (v, _) = tr.last_loss().unwrap();
@@ -80,6 +82,39 @@ fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
             if *it == tr.iteration {
                 spawned += s.spawned;
                 assert!(s.spawned > 0, "iteration {it}: {s}");
+            }
+        }
+        // The transients learn their own sections: from the first spawn (iteration 60) to 85,
+        // with no densification between to move rows, their c, σ and v leave what the spawn
+        // gave on nearly every row. Fails with their Adam groups (`Population::own_groups`)
+        // disabled.
+        if tr.iteration == 60 {
+            assert!(!g.transient_rows().is_empty(), "the first spawn is at 60");
+            born = Some((g.transient_rows(), host.clone()));
+        }
+        if tr.iteration == 85 {
+            let (rows, b) = born.take().expect("a snapshot at 60");
+            assert_eq!(g.transient_rows(), rows, "rows moved before 85");
+            let r = rows.start as usize..rows.end as usize;
+            let share = |moved: usize| moved as f64 / r.len() as f64;
+            let c = r
+                .clone()
+                .filter(|&i| host.time[i][0] != b.time[i][0])
+                .count();
+            let w = r
+                .clone()
+                .filter(|&i| host.time[i][1] != b.time[i][1])
+                .count();
+            let v = r
+                .clone()
+                .filter(|&i| host.velocity[i] != b.velocity[i])
+                .count();
+            for (name, m) in [("time centre", c), ("log-width", w), ("velocity", v)] {
+                assert!(
+                    share(m) > 0.9,
+                    "{name}: {m} of {} transients moved",
+                    r.len()
+                );
             }
         }
     }
@@ -213,12 +248,21 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
     // Split, so dynamic.bin is written beside transients.ply and eval reads both.
     let mut c = cfg();
     c.sparsity.mode = SparsityMode::Auto;
+    // Transients come from the flag, which wins over the config's `off`.
+    c.transient.mode = TransientMode::Off;
     std::fs::write(&toml, c.to_toml()).unwrap();
     let out = tmp.path().join("run");
     let bin = env!("CARGO_BIN_EXE_dispflow-vk");
     let o = std::process::Command::new(bin)
         .env("LP_NUM_THREADS", "1")
-        .args(["train", "--preset", "fast", "--config"])
+        .args([
+            "train",
+            "--preset",
+            "fast",
+            "--transients",
+            "on",
+            "--config",
+        ])
         .arg(&toml)
         .arg("--data")
         .arg(&scene)
@@ -229,6 +273,8 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
     assert!(stderr.contains("spawned after iteration"), "{stderr}");
+    let saved = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(saved.contains("[transient]\nmode = \"on\""), "{saved}");
     assert!(stderr.contains("split after iteration"), "{stderr}");
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
@@ -405,4 +451,105 @@ fn detached_motion_weights_leave_the_time_gradients_to_the_photometric_render() 
             ),
         }
     }
+}
+
+/// `auto`, the fast preset's default: a round spawns nothing until a frame's residual has held
+/// through `gate` comparisons (the canonical model has shown it cannot draw it), and no budget
+/// row is kept for transients before the first spawn.
+#[test]
+fn auto_spawns_once_a_residual_has_held_through_the_gate() {
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let mut c = cfg();
+    c.transient.mode = TransientMode::Auto;
+    c.transient.persist = 1e-6; // every residual holds: the gate alone decides when
+    c.transient.gate = 2;
+    c.transient.uncovered = 0.0; // the coverage rule: below
+    assert_eq!(
+        c.canonical_budget(),
+        c.densify.budget,
+        "no share kept at the start"
+    );
+    let reserve = Reserve::of(&c);
+    let mut on = c.clone();
+    on.transient.mode = TransientMode::On;
+    assert_eq!(on.canonical_budget(), on.densify.budget - reserve.share);
+    let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
+    let mut rounds = Vec::new();
+    while tr.iteration < 125 {
+        tr.step(false, false).unwrap();
+        let g = &tr.model.gaussians;
+        let held = g.transient_rows().len();
+        let want = if held == 0 {
+            0
+        } else {
+            reserve.share.saturating_sub(held)
+        };
+        assert_eq!(reserve.rows(g), want, "iteration {}", tr.iteration);
+        match &tr.last_spawn {
+            Some((it, s)) if *it == tr.iteration => rounds.push((*it, s.clone(), held)),
+            _ => {}
+        }
+    }
+    let its: Vec<u32> = rounds.iter().map(|r| r.0).collect();
+    assert_eq!(its, [60, 90, 120]);
+    let (_, first, held) = &rounds[0];
+    assert!(
+        first.looked_at > 0 && first.first_looks == first.looked_at,
+        "{first}"
+    );
+    assert_eq!((first.spawned, *held), (0, 0));
+    let (_, second, held) = &rounds[1];
+    assert!(
+        second.held == second.looked_at && second.looked_at > 0,
+        "{second}"
+    );
+    assert_eq!((second.spawned, *held), (0, 0));
+    let (_, third, held) = &rounds[2];
+    assert!(
+        third.spawned > 0 && *held as usize == third.spawned,
+        "{third}"
+    );
+    // Where the model draws the wrong pixels (it covers the whole tiny scene), a frame held
+    // through the gate is left to densification: not all of its wrong pixels are bare.
+    c.transient.uncovered = 1.0;
+    let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
+    train_common::run_to(&mut tr, 120);
+    let (it, s) = tr.last_spawn.clone().unwrap();
+    assert!(
+        it == 120 && s.spawned == 0 && s.covered == s.looked_at,
+        "{s}"
+    );
+    assert!(tr.model.gaussians.transient_rows().is_empty());
+}
+
+/// A scene that never opens `auto`'s gate pays nothing in quality: the run is bit for bit the
+/// run without transients (the rounds only look; no row, no reserve, no state changes).
+#[test]
+fn auto_with_a_closed_gate_trains_exactly_as_off() {
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let run = |mode: TransientMode| {
+        let mut c = cfg();
+        c.iterations = 120;
+        c.transient.mode = mode;
+        c.transient.persist = 1e-6;
+        c.transient.gate = 1000;
+        let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
+        train_common::run_to(&mut tr, c.iterations);
+        let looked = tr.last_spawn.as_ref().map(|s| s.1.looked_at);
+        (tr.checkpoint().unwrap(), looked)
+    };
+    let (auto, looked) = run(TransientMode::Auto);
+    let (off, none) = run(TransientMode::Off);
+    assert!(
+        looked.is_some_and(|n| n > 0) && none.is_none(),
+        "auto looked, off did not"
+    );
+    assert!(auto.model.gaussians.transient_rows().is_empty());
+    assert!(auto == off, "auto with a closed gate differs from off");
 }

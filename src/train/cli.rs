@@ -192,10 +192,13 @@ pub struct TrainArgs {
     /// is not its cause and the run goes on without rolling back) [default: warn].
     #[arg(long, value_enum)]
     pub on_collapse: Option<super::collapse::OnCollapse>,
-    /// Transient Gaussians: on (a second population, local in time, spawned every
-    /// transient.every steps where the frames with the largest residual are wrong: for what
-    /// moves most of its size per frame, appears, vanishes or splits; config [transient]) or
-    /// off [default: off].
+    /// Transient Gaussians, a second population local in time for what moves most of its
+    /// size per frame, appears, vanishes or splits (config [transient]): auto (spawned only
+    /// once a frame's localized residual has held through transient.gate looks
+    /// transient.every steps apart, i.e. the canonical model cannot draw it; no budget is
+    /// reserved before; the fast preset's default), on (spawned every transient.every steps
+    /// from the frames with the largest held residual, a quarter of the budget reserved from
+    /// the start) or off (the paper preset's default).
     #[arg(long, value_enum)]
     pub transients: Option<super::config::TransientMode>,
     /// Keep every checkpoint as OUT/checkpoints/NNNNNN.ckpt (for `dispflow-vk signal`).

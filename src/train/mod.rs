@@ -701,7 +701,7 @@ fn build_passes(
         densify: DensifyPass::new(
             gpu,
             cfg.densify,
-            cfg.densify.budget - cfg.canonical_budget(),
+            crate::train::population::Reserve::of(cfg),
             times.extent,
             cfg.seed,
         )?,

@@ -8,7 +8,7 @@
 
 use super::config::{
     Background, CurriculumAnchor, DeformMode, GradStat, MotionOrder, MotionSchedule, MotionWeights,
-    SparsityMode, TimeNoise, TrainConfig, TransientMode,
+    SparsityMode, TimeNoise, TrainConfig,
 };
 use crate::model::optim::ExpLr;
 
@@ -367,7 +367,7 @@ pub fn motion_weight_at(cfg: &TrainConfig, iteration: u32) -> f32 {
 /// window, counted in fractions of the run).
 pub fn spawn_due(cfg: &TrainConfig, it: u32) -> bool {
     let t = &cfg.transient;
-    if t.mode != TransientMode::On {
+    if !t.mode.spawns() {
         return false;
     }
     let n = cfg.iterations as f64;

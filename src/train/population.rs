@@ -120,8 +120,30 @@ impl Population {
     }
 }
 
-/// The budget rows densification leaves free for transients: their share (`share`, 0
-/// without them) less the rows they hold.
-pub fn reserved_rows(share: u32, g: &GaussianState) -> u32 {
-    share.saturating_sub(g.transient_rows().len())
+/// The budget rows densification leaves free for transients (`transient.max_share`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Reserve {
+    /// The transients' share of the budget (0 without them).
+    pub share: u32,
+    /// Whether the share is kept before any transient exists (`--transients on`); `auto`
+    /// keeps it only while transients are held, so a scene that never spawns loses no row.
+    pub before_first: bool,
+}
+
+impl Reserve {
+    pub fn of(cfg: &crate::train::config::TrainConfig) -> Reserve {
+        Reserve {
+            share: cfg.transient_share(),
+            before_first: cfg.transient.mode == crate::train::config::TransientMode::On,
+        }
+    }
+
+    /// The rows kept free now: the share less the rows the transients hold.
+    pub fn rows(&self, g: &GaussianState) -> u32 {
+        let held = g.transient_rows().len();
+        if held == 0 && !self.before_first {
+            return 0;
+        }
+        self.share.saturating_sub(held)
+    }
 }

@@ -145,7 +145,7 @@ pub(super) fn train_loop(
     let mut prune = None;
     let mut spawn_seen = None;
     let mut split_seen = None;
-    let transients_on = cfg.transient.mode == super::config::TransientMode::On;
+    let transients_on = cfg.transient.mode.spawns();
     progress.start(cfg.iterations, tr.iteration);
     while tr.iteration < cfg.iterations {
         let next = tr.iteration + 1;

@@ -261,7 +261,7 @@ fn finish(
     let mut metrics = Report::new(cfg, ctx, per);
     metrics.initial_psnr = initial_psnr;
     metrics.background_reason = background_reason;
-    if cfg.transient.mode == super::config::TransientMode::On {
+    if cfg.transient.mode.spawns() {
         let g = &tr.model.gaussians;
         metrics.gaussians_canonical = Some(g.canonical_rows().len());
         metrics.gaussians_transient = Some(g.transient_rows().len());

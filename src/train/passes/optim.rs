@@ -12,7 +12,7 @@ use crate::model::optim::AdamHyper;
 use crate::model::state::{GaussianState, Model, TransientShape};
 use crate::train::config::DensifyConfig;
 use crate::train::plan::StepLr;
-use crate::train::population::{reserved_rows, Population};
+use crate::train::population::{Population, Reserve};
 use crate::vk::{BufSlice, Gpu, Recorder};
 
 pub struct AdamPass {
@@ -118,8 +118,8 @@ pub struct DensifyPass {
     densifier: Densifier,
     pub bufs: DensifyBuffers,
     cfg: DensifyConfig,
-    /// Rows kept free for transients (their share of the budget, less what they hold).
-    transient_share: u32,
+    /// Rows kept free for transients.
+    reserve: Reserve,
     extent: f32,
     seed: u32,
     temporal: Temporal,
@@ -128,11 +128,10 @@ pub struct DensifyPass {
 }
 
 impl DensifyPass {
-    /// `transient_share`: the budget's rows kept for transients (0 without them).
     pub fn new(
         gpu: &Gpu,
         cfg: DensifyConfig,
-        transient_share: u32,
+        reserve: Reserve,
         extent: f32,
         seed: u64,
     ) -> Result<Self> {
@@ -141,7 +140,7 @@ impl DensifyPass {
             bufs: densifier.buffers(gpu, cfg.budget)?,
             densifier,
             cfg,
-            transient_share,
+            reserve,
             extent,
             seed: seed as u32,
             temporal: Temporal::new(gpu)?,
@@ -176,7 +175,7 @@ impl DensifyPass {
     ) -> Result<()> {
         let d = &self.cfg;
         // Growth stops where it would eat into the transients' free share.
-        let reserve = reserved_rows(self.transient_share, g);
+        let reserve = self.reserve.rows(g);
         let mut s = DensifySettings::new(self.extent, d.budget.saturating_sub(reserve).max(g.n));
         s.grad_threshold = d.grad_threshold;
         s.percent_dense = d.percent_dense;

@@ -10,6 +10,25 @@ pub fn local_residual(render: &[[f32; 4]], gt: &[[f32; 4]], min_error: f32) -> f
     err.iter().filter(|&&e| e >= thr).map(|&e| e as f64).sum()
 }
 
+/// The share of the pixels [`worst_pixels`] would spawn from where the render draws nothing
+/// (coverage 1 − T, its alpha, under one half): an object missing from the model there,
+/// rather than one drawn wrong (0 when no pixel is over the threshold).
+pub fn uncovered_share(render: &[[f32; 4]], gt: &[[f32; 4]], min_error: f32) -> f64 {
+    let err = pixel_errors(render, gt);
+    let thr = threshold(&err, min_error);
+    let (mut over, mut bare) = (0usize, 0usize);
+    for (e, r) in err.iter().zip(render) {
+        if *e >= thr {
+            over += 1;
+            bare += (r[3] < 0.5) as usize;
+        }
+    }
+    if over == 0 {
+        return 0.0;
+    }
+    bare as f64 / over as f64
+}
+
 /// The error a pixel needs to spawn: at least `min_error` and [`RELATIVE_ERROR`] times the
 /// frame's median.
 pub fn threshold(err: &[f32], min_error: f32) -> f32 {
@@ -90,6 +109,20 @@ mod tests {
         assert!((local_residual(&r, &gt, 0.1) - 1.5).abs() < 1e-6);
         // Wrong everywhere alike: nothing local.
         assert_eq!(local_residual(&vec![[0.5f32; 4]; 100], &gt, 0.1), 0.0);
+    }
+
+    #[test]
+    fn uncovered_counts_the_wrong_pixels_the_render_leaves_bare() {
+        let gt = vec![[0.0f32, 0.0, 0.0, 1.0]; 100];
+        let mut r = gt.clone();
+        // Four wrong pixels: three drawn by nothing (alpha 0.1), one drawn wrong (0.9).
+        for (i, a) in [(3, 0.1), (4, 0.1), (5, 0.1), (6, 0.9)] {
+            r[i] = [0.9, 0.9, 0.9, a];
+        }
+        // A right pixel left bare does not count.
+        r[50][3] = 0.0;
+        assert!((uncovered_share(&r, &gt, 0.1) - 0.75).abs() < 1e-12);
+        assert_eq!(uncovered_share(&gt, &gt, 0.1), 0.0, "nothing wrong");
     }
 
     #[test]

@@ -2,12 +2,21 @@
 //! persists, track their wrong pixels through the temporal neighbours and append the
 //! transients they back-project into free rows of the budget.
 
-use super::residual::local_residual;
+use super::residual::{local_residual, uncovered_share};
 use super::spawn::{transients_of, SpawnFrame, SpawnReport, Verdict};
 use super::track::{Residual, Tracker};
 use crate::error::Result;
 use crate::model::gaussians::HostGaussians;
+use crate::train::config::TransientMode;
 use crate::train::Trainer;
+
+impl Trainer<'_> {
+    /// Whether transients have been spawned this run (`auto`'s gate is open): a spawn added
+    /// rows, or the model holds some (a resumed run).
+    fn transients_opened(&self) -> bool {
+        self.looks.opened || !self.model.gaussians.transient_rows().is_empty()
+    }
+}
 
 /// The farthest a tracked transient may move per frame spacing, as a share of the scene
 /// bounds' diagonal (a hypothesis faster than that is a false match across the scene).
@@ -45,9 +54,12 @@ impl Trainer<'_> {
         // draw it), rotating each spawn, rendered; those with the largest localized residual
         // spawn.
         let window = self.times.window(&self.cfg, self.iteration.max(1));
+        // `auto` asks a closed gate for a residual held through `gate` comparisons.
+        let closed = tc.mode == TransientMode::Auto && !self.transients_opened();
+        let need = if closed { tc.gate } else { 1 };
         let cands = self
             .looks
-            .candidates(window, 3 * tc.frames as usize, tc.persist);
+            .candidates(window, 3 * tc.frames as usize, tc.persist, need);
         let mut shots = Vec::new();
         for &i in &cands {
             let Some((render, gt)) = self.shot(i, view)? else {
@@ -57,7 +69,14 @@ impl Trainer<'_> {
             shots.push((r, i, render, gt));
         }
         report.looked_at = shots.len();
-        shots.retain(|s| match self.looks.judge(s.1, s.0, tc.persist) {
+        shots.retain(|s| match self.looks.judge(s.1, s.0, tc.persist, need) {
+            // A closed gate opens only where the model draws nothing.
+            Verdict::Spawn
+                if closed && uncovered_share(&s.2, &s.3, tc.min_error) < tc.uncovered as f64 =>
+            {
+                report.covered += 1;
+                false
+            }
             Verdict::Spawn => true,
             Verdict::FirstLook => {
                 report.first_looks += 1;
@@ -65,6 +84,10 @@ impl Trainer<'_> {
             }
             Verdict::Improving => {
                 report.improving += 1;
+                false
+            }
+            Verdict::Held => {
+                report.held += 1;
                 false
             }
         });
@@ -116,6 +139,7 @@ impl Trainer<'_> {
             all.append(&t);
         }
         report.spawned = all.len();
+        self.looks.opened |= !all.is_empty();
         let first = self.model.gaussians.n;
         self.model.gaussians.append_transients(self.gpu, &all)?;
         if let Some(s) = self.passes.as_ref() {

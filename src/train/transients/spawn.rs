@@ -37,6 +37,10 @@ pub struct SpawnReport {
     /// frames looked at for the first time (`transient.persist`).
     pub improving: usize,
     pub first_looks: usize,
+    /// Frames whose residual held, short of `auto`'s gate (`transient.gate`), and frames
+    /// through it but covered by the model (`transient.uncovered`).
+    pub held: usize,
+    pub covered: usize,
 }
 
 impl std::fmt::Display for SpawnReport {
@@ -69,6 +73,12 @@ impl std::fmt::Display for SpawnReport {
         if self.first_looks > 0 {
             write!(f, "; {} frames looked at first", self.first_looks)?;
         }
+        if self.held > 0 {
+            write!(f, "; {} held frames short of the gate", self.held)?;
+        }
+        if self.covered > 0 {
+            write!(f, "; {} held frames drawn where wrong", self.covered)?;
+        }
         if self.over_budget > 0 {
             write!(f, "; {} pixels left out by the budget", self.over_budget)?;
         }
@@ -77,14 +87,16 @@ impl std::fmt::Display for SpawnReport {
 }
 
 /// Which training frames the spawns look at, and each frame's localized residual at its last
-/// look (`transient.persist`).
+/// look (`transient.persist`) with how many successive looks it has persisted through.
 #[derive(Clone, Debug, Default)]
 pub struct Looks {
     /// Candidate sets drawn (rotates them).
     rounds: usize,
-    /// The candidates the next spawn looks at again.
-    recheck: Option<Vec<usize>>,
-    last: std::collections::HashMap<usize, f64>,
+    /// The candidates the next spawns look at again, and how many more times.
+    recheck: Option<(Vec<usize>, u32)>,
+    last: std::collections::HashMap<usize, (f64, u32)>,
+    /// Whether a spawn has added rows this run (`auto`'s gate is open).
+    pub opened: bool,
 }
 
 /// What a look at a frame's residual decides (`transient.persist`).
@@ -95,37 +107,55 @@ pub enum Verdict {
     FirstLook,
     /// Shrank since the last look: left to training.
     Improving,
+    /// Held since the last look, but not through as many looks as the gate asks.
+    Held,
 }
 
 impl Looks {
     /// The next spawn's `k` candidates from `window` (training frames in time order), rotating;
-    /// with `persist` on, every set is looked at by two successive spawns, so each residual is
-    /// compared with itself `every` steps apart (a whole rotation can be longer than the run).
-    /// Only a frame looked at before can spawn then, so the first spawn of each pair spawns
-    /// from none of a set new to the run: about half as many spawns.
-    pub fn candidates(&mut self, window: &[usize], k: usize, persist: f32) -> Vec<usize> {
-        if let Some(c) = self.recheck.take() {
+    /// with `persist` on, every set is looked at by `1 + need` successive spawns, so each
+    /// residual is compared with itself `every` steps apart `need` times (a whole rotation can
+    /// be longer than the run). Only a frame looked at before can spawn then, so the first
+    /// spawn of each set spawns from none of a set new to the run.
+    pub fn candidates(
+        &mut self,
+        window: &[usize],
+        k: usize,
+        persist: f32,
+        need: u32,
+    ) -> Vec<usize> {
+        if let Some((c, left)) = self.recheck.take() {
+            if left > 1 {
+                self.recheck = Some((c.clone(), left - 1));
+            }
             return c;
         }
         let c = candidate_frames(window, k, self.rounds);
         self.rounds += 1;
-        self.recheck = (persist > 0.0).then(|| c.clone());
+        self.recheck = (persist > 0.0 && need > 0).then(|| (c.clone(), need));
         c
     }
 
     /// A spawn that looks at nothing (the budget is full) still takes its turn: the
-    /// pending second look, else a new set, so the rotation goes on as if it had looked.
+    /// pending look, else a new set, so the rotation goes on as if it had looked.
     pub fn skip(&mut self) {
-        if self.recheck.take().is_none() {
-            self.rounds += 1;
+        match self.recheck.take() {
+            Some((c, left)) if left > 1 => self.recheck = Some((c, left - 1)),
+            Some(_) => {}
+            None => self.rounds += 1,
         }
     }
 
-    /// Records `frame`'s residual `now` and judges it ([`persists`]).
-    pub fn judge(&mut self, frame: usize, now: f64, persist: f32) -> Verdict {
-        let last = self.last.insert(frame, now);
-        match (persists(now, last, persist), last) {
-            (true, _) => Verdict::Spawn,
+    /// Records `frame`'s residual `now` and judges it ([`persists`]): it spawns once it has
+    /// persisted through `need` successive comparisons.
+    pub fn judge(&mut self, frame: usize, now: f64, persist: f32, need: u32) -> Verdict {
+        let last = self.last.get(&frame).copied();
+        let held = persists(now, last.map(|l| l.0), persist);
+        let streak = if held { last.map_or(0, |l| l.1) + 1 } else { 0 };
+        self.last.insert(frame, (now, streak));
+        match (held, last) {
+            (true, _) if persist <= 0.0 || streak >= need => Verdict::Spawn,
+            (true, _) => Verdict::Held,
             (false, None) => Verdict::FirstLook,
             (false, Some(_)) => Verdict::Improving,
         }
@@ -305,39 +335,64 @@ mod tests {
     fn with_persist_each_candidate_set_is_looked_at_twice() {
         let by_time: Vec<usize> = (0..12).collect();
         let mut off = Looks::default();
-        assert_eq!(off.candidates(&by_time, 4, 0.0), vec![0, 3, 6, 9]);
-        assert_eq!(off.candidates(&by_time, 4, 0.0), vec![1, 4, 7, 10]);
+        assert_eq!(off.candidates(&by_time, 4, 0.0, 1), vec![0, 3, 6, 9]);
+        assert_eq!(off.candidates(&by_time, 4, 0.0, 1), vec![1, 4, 7, 10]);
         let mut on = Looks::default();
-        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![0, 3, 6, 9]);
-        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![0, 3, 6, 9]);
-        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![1, 4, 7, 10]);
-        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![1, 4, 7, 10]);
-        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![2, 5, 8, 11]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8, 1), vec![0, 3, 6, 9]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8, 1), vec![0, 3, 6, 9]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8, 1), vec![1, 4, 7, 10]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8, 1), vec![1, 4, 7, 10]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8, 1), vec![2, 5, 8, 11]);
         // Frame 3: the first look records, a held residual spawns, a shrunk one does not.
-        assert_eq!(on.judge(3, 10.0, 0.8), Verdict::FirstLook);
-        assert_eq!(on.judge(3, 9.0, 0.8), Verdict::Spawn);
-        assert_eq!(on.judge(3, 5.0, 0.8), Verdict::Improving);
+        assert_eq!(on.judge(3, 10.0, 0.8, 1), Verdict::FirstLook);
+        assert_eq!(on.judge(3, 9.0, 0.8, 1), Verdict::Spawn);
+        assert_eq!(on.judge(3, 5.0, 0.8, 1), Verdict::Improving);
         assert_eq!(
-            on.judge(3, 4.5, 0.8),
+            on.judge(3, 4.5, 0.8, 1),
             Verdict::Spawn,
             "compared with the last look, not the first"
         );
-        assert_eq!(off.judge(3, 1.0, 0.0), Verdict::Spawn);
+        assert_eq!(off.judge(3, 1.0, 0.0, 1), Verdict::Spawn);
+    }
+
+    #[test]
+    fn the_gate_asks_for_a_residual_held_through_more_looks() {
+        let by_time: Vec<usize> = (0..12).collect();
+        let mut l = Looks::default();
+        for _ in 0..3 {
+            assert_eq!(l.candidates(&by_time, 4, 0.8, 2), vec![0, 3, 6, 9]);
+        }
+        assert_eq!(l.candidates(&by_time, 4, 0.8, 2), vec![1, 4, 7, 10]);
+        assert_eq!(l.judge(3, 10.0, 0.8, 2), Verdict::FirstLook);
+        assert_eq!(l.judge(3, 9.0, 0.8, 2), Verdict::Held);
+        assert_eq!(l.judge(3, 8.0, 0.8, 2), Verdict::Spawn);
+        // A shrink starts the count again.
+        assert_eq!(l.judge(3, 4.0, 0.8, 2), Verdict::Improving);
+        assert_eq!(l.judge(3, 4.0, 0.8, 2), Verdict::Held);
+        assert_eq!(l.judge(3, 4.0, 0.8, 2), Verdict::Spawn);
+        // Once open (need 1), a held residual spawns at once.
+        assert_eq!(l.judge(3, 4.0, 0.8, 1), Verdict::Spawn);
+        // Skips count the pending looks down.
+        let mut s = Looks::default();
+        s.candidates(&by_time, 4, 0.8, 2);
+        s.skip();
+        s.skip();
+        assert_eq!(s.candidates(&by_time, 4, 0.8, 2), vec![1, 4, 7, 10]);
     }
 
     #[test]
     fn a_skipped_spawn_takes_its_turn() {
         let by_time: Vec<usize> = (0..12).collect();
         let mut on = Looks::default();
-        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![0, 3, 6, 9]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8, 1), vec![0, 3, 6, 9]);
         on.skip(); // the second look at {0, 3, 6, 9}
-        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![1, 4, 7, 10]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8, 1), vec![1, 4, 7, 10]);
         on.skip(); // ditto
         on.skip(); // a new set: {2, 5, 8, 11}
-        assert_eq!(on.candidates(&by_time, 4, 0.8), vec![0, 3, 6, 9]);
+        assert_eq!(on.candidates(&by_time, 4, 0.8, 1), vec![0, 3, 6, 9]);
         let mut off = Looks::default();
         off.skip();
-        assert_eq!(off.candidates(&by_time, 4, 0.0), vec![1, 4, 7, 10]);
+        assert_eq!(off.candidates(&by_time, 4, 0.0, 1), vec![1, 4, 7, 10]);
     }
 
     #[test]
