@@ -93,7 +93,7 @@ pub fn open_run(dir: &Path, data: Option<&Path>) -> Result<Run> {
     }
     let ply = need("point_cloud.ply")?;
     let mut gaussians = read_ply(&ply)?;
-    if !gaussians.transient_rows().is_empty() {
+    if gaussians.populations().temporal() {
         return Err(invalid(
             &ply,
             "holds transient Gaussians; a run writes them to transients.ply",

@@ -257,7 +257,7 @@ impl HostGaussians {
     pub fn append(&mut self, other: &HostGaussians) {
         assert_eq!(self.sh_coeffs, other.sh_coeffs, "append: SH layouts differ");
         assert!(
-            self.transient_rows().is_empty() || other.canonical_rows().is_empty(),
+            !self.populations().temporal() || other.canonical_rows().is_empty(),
             "append: canonical rows after transients"
         );
         let (time, vel) = (self.time_or_zeros(), self.velocity_or_zeros());
@@ -327,7 +327,7 @@ impl HostGaussians {
         rows: Populations,
     ) -> Result<Self> {
         let n = rows.len();
-        let temporal = !rows.transient.is_empty();
+        let temporal = rows.temporal();
         if n == 0 {
             return Ok(HostGaussians {
                 sh_coeffs: layout.sh_coeffs,

@@ -54,6 +54,12 @@ impl Populations {
         }
     }
 
+    /// Whether the rows carry the temporal sections (time centre and width, velocity): only
+    /// transients have them, so storage and files hold them only when some row is one.
+    pub fn temporal(self) -> bool {
+        !self.transient.is_empty()
+    }
+
     /// Live rows of every population.
     pub fn len(self) -> u32 {
         self.transient.end

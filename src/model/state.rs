@@ -420,7 +420,7 @@ pub fn gaussian_blobs<'a>(prefix: &str, g: &'a HostGaussians, non_negative: bool
     ]
     .into_iter()
     .chain(
-        (!g.transient_rows().is_empty() && g.time.len() == g.len())
+        (g.populations().temporal() && g.time.len() == g.len())
             .then(|| {
                 [
                     ("time", g.time.as_flattened(), 2),

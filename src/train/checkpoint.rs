@@ -142,7 +142,7 @@ fn take_gauss(
     }
     let rows = Populations::split(n as u32, transients);
     let (mut time, mut velocity) = (Vec::new(), Vec::new());
-    if !rows.transient.is_empty() {
+    if rows.temporal() {
         for (k, row) in [("time", 2), ("velocity", 3)] {
             let v = m
                 .remove(&format!("{prefix}{k}"))
@@ -521,7 +521,7 @@ pub fn is_kept_checkpoint(p: &Path) -> bool {
 /// vz: a run writes them apart, to `transients.ply`.
 pub fn write_ply(path: &Path, g: &HostGaussians) -> Result<()> {
     let rows = g.populations();
-    let temporal = !rows.transient.is_empty();
+    let temporal = rows.temporal();
     if temporal && !rows.canonical.is_empty() {
         return Err(Error::Invalid(format!(
             "{}: a PLY holds canonical or transient Gaussians, not both ({} of {} transient)",
