@@ -57,9 +57,10 @@ impl Trainer<'_> {
         // `auto` asks a closed gate for a residual held through `gate` comparisons.
         let closed = tc.mode == TransientMode::Auto && !self.transients_opened();
         let need = if closed { tc.gate } else { 1 };
-        let cands = self
-            .looks
-            .candidates(window, 3 * tc.frames as usize, tc.persist, need);
+        // A closed gate looks at `frames` candidates, an open one at three times as many to
+        // spawn from the worst: a scene that never opens it pays a third of the renders.
+        let k = if closed { 1 } else { 3 } * tc.frames as usize;
+        let cands = self.looks.candidates(window, k, tc.persist, need);
         let mut shots = Vec::new();
         for &i in &cands {
             let Some((render, gt)) = self.shot(i, view)? else {
