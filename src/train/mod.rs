@@ -59,7 +59,6 @@ use population::Population;
 use step::StepPasses;
 
 /// A training frame's render and its ground truth, [H·W] RGBA each.
-/// A training frame as drawn now, with its ground truth ([H·W] RGBA each).
 pub(crate) type Shot = (Vec<[f32; 4]>, Vec<[f32; 4]>);
 
 /// Numbers reported per logged step.
