@@ -371,7 +371,8 @@ pub struct TransientConfig {
     /// training is still shrinking (the deformation learning the motion) is left to training;
     /// one that persists (an object the canonical model cannot draw) spawns. A frame's first
     /// look only records its residual; with `persist` on, each set of candidate frames is
-    /// looked at by two successive spawns, `every` steps apart. 0.8 by default: the best rows
+    /// looked at by two successive spawns, `every` steps apart (three under `auto`'s closed
+    /// gate, `gate`). 0.8 by default: the best rows
     /// of `--transients on` on an H100 at two seeds (docs/usage.md).
     pub persist: f32,
     /// Under `auto`, the successive persisting comparisons (each `every` steps apart, each
