@@ -466,7 +466,8 @@ fn auto_spawns_once_a_residual_has_held_through_the_gate() {
     c.transient.mode = TransientMode::Auto;
     c.transient.persist = 1e-6; // every residual holds: the gate alone decides when
     c.transient.gate = 2;
-    c.transient.uncovered = 0.0; // the coverage rule: below
+    c.transient.uncovered = 0.0; // the coverage and size rules: below
+    c.transient.min_residual = 0.0;
     assert_eq!(
         c.canonical_budget(),
         c.densify.budget,
@@ -523,6 +524,14 @@ fn auto_spawns_once_a_residual_has_held_through_the_gate() {
         "{s}"
     );
     assert!(tr.model.gaussians.transient_rows().is_empty());
+    // Nor where the wrong region is too small to matter (a residual per pixel of 1 is a frame
+    // wrong by the whole colour range everywhere).
+    c.transient.uncovered = 0.0;
+    c.transient.min_residual = 1.0;
+    let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
+    train_common::run_to(&mut tr, 120);
+    let (it, s) = tr.last_spawn.clone().unwrap();
+    assert!(it == 120 && s.spawned == 0 && s.small == s.looked_at, "{s}");
 }
 
 /// A scene that never opens `auto`'s gate pays nothing in quality: the run is bit for bit the

@@ -72,7 +72,14 @@ impl Trainer<'_> {
         }
         report.looked_at = shots.len();
         shots.retain(|s| match self.looks.judge(s.1, s.0, tc.persist, need) {
-            // A closed gate opens only where the model draws nothing.
+            // A closed gate opens only where the model draws nothing, over a region that
+            // matters (the residual per pixel of the frame).
+            Verdict::Spawn
+                if closed && (s.0 / s.2.len().max(1) as f64) < tc.min_residual as f64 =>
+            {
+                report.small += 1;
+                false
+            }
             Verdict::Spawn
                 if closed && uncovered_share(&s.2, &s.3, tc.min_error) < tc.uncovered as f64 =>
             {

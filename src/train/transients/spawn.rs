@@ -41,6 +41,9 @@ pub struct SpawnReport {
     /// through it but covered by the model (`transient.uncovered`).
     pub held: usize,
     pub covered: usize,
+    /// Frames through `auto`'s gate whose localized residual is too small to open it
+    /// (`transient.min_residual`).
+    pub small: usize,
 }
 
 impl std::fmt::Display for SpawnReport {
@@ -78,6 +81,9 @@ impl std::fmt::Display for SpawnReport {
         }
         if self.covered > 0 {
             write!(f, "; {} held frames drawn where wrong", self.covered)?;
+        }
+        if self.small > 0 {
+            write!(f, "; {} held frames wrong over too little", self.small)?;
         }
         if self.over_budget > 0 {
             write!(f, "; {} pixels left out by the budget", self.over_budget)?;
