@@ -389,7 +389,7 @@ pub struct TransientConfig {
     /// pixels) per pixel of the frame that a held frame needs to open the gate: the missing
     /// region must matter. 0.01 by default: at the gate's opening on mujoco-scene5 the frames
     /// read 0.019–0.031, on D-NeRF hellwarrior (a dark figure on black, whose thin parts are
-    /// bare) 0.003–0.004, where opening cost 0.3 dB.
+    /// bare) 0.002–0.004, where opening cost 0.30 dB.
     pub min_residual: f32,
     /// The share of the Gaussian budget kept for transients: the canonical population starts
     /// and densifies within the rest (so a scene whose initial points fill the budget still
