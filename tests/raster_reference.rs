@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use dispflow_vk::reference::raster::{
     blend_bwd, blend_bwd_f64, blend_fwd, blend_fwd_f64, project, project_bwd, project_bwd_f64,
-    project_f64, sigmoid, BlendGrads, BlendOut, BlendParams, Camera, Gaussians, Gaussians64,
-    ProjectGrads, Projected,
+    project_f64, radius_rect, sigmoid, BlendGrads, BlendOut, BlendParams, Camera, Gaussians,
+    Gaussians64, ProjectGrads, Projected,
 };
 use dispflow_vk::reference::sh;
 use dispflow_vk::testing::{assert_close, Tol};
@@ -1246,13 +1246,24 @@ fn depth_order_ties_skip_and_stop() {
         },
     );
 
-    // α < 1/255 in front is skipped but counts in n_contrib's position.
+    // α < 1/255 in front is skipped by the blend but counts in n_contrib's position when it is
+    // in the tile's list (binned to its 3σ square); binned to its opacity-aware box it is in
+    // no list at all. The image is the same either way.
     let mut u = s.clone();
     u.push([0.0, 0.0, 2.0], [0.3; 3], IDQ, -30.0, [1.0; 3]);
-    let (_, out_u) = u.render();
+    let (mut proj_u, out_box) = u.render();
+    assert_eq!(
+        proj_u.tile_rect[2], [0; 4],
+        "a Gaussian fainter than 1/255 has no tile"
+    );
+    assert_eq!(out_box.n_contrib[c], 2);
+    let m = proj_u.mean2d[2].map(f64::from);
+    proj_u.tile_rect[2] = radius_rect(&u.cam, m, proj_u.radius[2]);
+    let out_u = blend_fwd(&u.params, &proj_u, &u.features);
     assert_eq!(out_u.n_contrib[c], 3);
     let (_, out_s) = s.render();
     assert_eq!(out_u.rgb[c], out_s.rgb[c]);
+    assert_eq!(out_box.rgb[c], out_s.rgb[c]);
 
     // Stop: after one α = 0.999 layer T = 1e-3; a second would take it to 1e-6 < 1e-4, so it is
     // not blended and the pixel is done (the third is never reached).

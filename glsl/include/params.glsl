@@ -202,7 +202,7 @@ struct ProjectParams {
     uint isect_capacity;
     uint opacity_scale; // project/project_bwd: multiply each opacity by op_scale[i] (0: culled)
     uint feat_detach;   // project_bwd: d_op_scale leaves out grad2d slot 12 (the features' share)
-    uint pad1;
+    uint splat_extent;  // project: 0 = the 3σ square of `radius`, 1 = opacity_rect (raster.glsl)
     uint pad2;
 };
 

@@ -10,7 +10,8 @@
 
 // Per-Gaussian splat record written by `project`, read by blend (3 × vec4):
 //   [0] = (mean2d.x, mean2d.y, depth, opacity)   [1] = (conic a, b, c, radius)
-//   [2] = (r, g, b, 0)
+//   [2] = (r, g, b, reach): |dy| past which α < 1/255 (alpha_extent's y, with
+//         ProjectParams.splat_extent; else EXTENT_NONE): the CPU blends skip those pixel rows
 #define SPLAT_STRIDE 3
 
 // Per-Gaussian 2D gradient record accumulated by blend_bwd (stride 13 floats):
@@ -201,6 +202,44 @@ Proj project_gaussian(ProjectParams pc, vec3 mean, vec3 scale, vec4 quat) {
     r.rect = uvec4(clamp(lo, vec2(0.0), tiles), clamp(hi, vec2(0.0), tiles));
     r.visible = r.rect.x < r.rect.z && r.rect.y < r.rect.w;
     return r;
+}
+
+// Slack of alpha_extent (mirrored in Rust: reference::raster::project): the threshold's log
+// is raised by EXTENT_LOG_SLACK (α's rounding in exp and the product, ~1e-6 relative) and the
+// half-extent grown by the factor 1 + κ·EXTENT_REL_SLACK, κ = λ_max/λ_min ≤ radius²/(9·0.3),
+// for the f32 conic's error in σ (relative, a few ulp times κ: the conic is adj(Σ2)/det of
+// a rounded Σ2); past a growth of 1.5 (needles, radius ≳ 300 px) the 3σ square stands.
+#define EXTENT_LOG_SLACK 1e-3
+#define EXTENT_REL_SLACK (1.0 / 65536.0)
+
+// Half-extents (x, y) in pixels past which the blend draws nothing of the splat: the blend
+// skips α = opacity·exp(−σ) below 1/255 (ALPHA_MIN), and σ = ½ dᵀΣ2⁻¹d ≥ ½ dx²/Σ2xx (its
+// minimum over dy), so no pixel with |dx| > sqrt(2 ln(255·opacity)·Σ2xx) is drawn; the same in
+// y (gsplat's opacity-aware radius, per axis: the ellipse's bounding box). Whole pixels, padded
+// by half a pixel. Negative: drawn nowhere (opacity < 1/255, and α ≤ opacity); EXTENT_NONE:
+// no bound (the slack's growth past 1.5).
+#define EXTENT_NONE 1e30
+vec2 alpha_extent(Proj r, float opacity) {
+    if (!(opacity >= ALPHA_MIN)) return vec2(-1.0);
+    float kappa = r.radius * r.radius / (9.0 * DILATION);
+    float grow = 1.0 + kappa * EXTENT_REL_SLACK;
+    if (!(grow <= 1.5)) return vec2(EXTENT_NONE);
+    float k = 2.0 * (log(opacity * 255.0) + EXTENT_LOG_SLACK);
+    return ceil(sqrt(k * vec2(r.cov2.x, r.cov2.z)) * grow + 0.5);
+}
+
+// The tiles in which the blend can draw the splat: alpha_extent's box, capped at the 3σ
+// radius, so the rectangle lies inside r.rect and holds every pixel the blend draws: images
+// and gradients are those of r.rect, only the faint Gaussians' tile lists shrink. None below
+// opacity 1/255.
+uvec4 opacity_rect(ProjectParams pc, Proj r, float opacity) {
+    vec2 e = alpha_extent(r, opacity);
+    if (e.x < 0.0) return uvec4(0);
+    vec2 ext = min(e, vec2(r.radius));
+    vec2 lo = floor((r.mean2d - ext) / float(TILE));
+    vec2 hi = floor((r.mean2d + ext) / float(TILE)) + 1.0;
+    vec2 tiles = vec2(pc.tiles_x, pc.tiles_y);
+    return uvec4(clamp(lo, vec2(0.0), tiles), clamp(hi, vec2(0.0), tiles));
 }
 
 #endif

@@ -4,7 +4,8 @@
 // tile (pixel q = invocation + WG·i) with their blend state in registers. Each subgroup walks
 // the tile's splats back to front on its own (no barrier, no shared memory); per splat it
 // evaluates its PX pixel groups, summing the terms per lane, then folds the lanes once
-// (subgroupAdd) and one lane adds the sum with one float atomic per component.
+// (subgroupAdd) and one lane adds the sum with one float atomic per component. Pixel rows the
+// splat cannot reach (its record's `reach`) are skipped, as in the forward.
 //
 // Why on lavapipe: a workgroup is ceil(WG/8) coroutines of 8 SIMD lanes. The subgroup kernel
 // pays, per splat and tile, one subgroupAdd and one float atomic per component for every one
@@ -24,6 +25,9 @@
 #include "raster.glsl"
 
 #define WG (TILE * TILE / PX)
+#if (TILE % WG) != 0
+#error "a pixel's row q / TILE must be uniform: WG must divide TILE"
+#endif
 layout(local_size_x = WG) in;
 
 #include "blend_bwd_io.glsl"
@@ -77,7 +81,9 @@ void main() {
         uint gid = ids[j];      // uniform: broadcast loads below
         vec4 a = splats[SPLAT_STRIDE * gid];
         vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
-        vec3 col = splats[SPLAT_STRIDE * gid + 2].rgb;
+        vec4 c4 = splats[SPLAT_STRIDE * gid + 2];
+        vec3 col = c4.rgb;
+        float reach = c4.w; // |dy| past which α < 1/255 (alpha_extent)
 #if FEAT > 0
         float f[FEAT];
         for (int c = 0; c < FEAT; ++c) f[c] = feat[gid * FEAT + c];
@@ -89,6 +95,8 @@ void main() {
         float g_op = 0.0, g_z = 0.0, g_op_f = 0.0;
         bool any_live = false;
         for (int i = 0; i < PX; ++i) {
+            // Rows the splat cannot reach hold no α ≥ 1/255: skipped whole (as the forward).
+            if (abs(a.y - (float(origin.y + (WG * uint(i)) / TILE) + 0.5)) > reach) continue;
             uint q = t + WG * uint(i);
             vec2 d = a.xy - (vec2(origin + uvec2(q % TILE, q / TILE)) + 0.5);
             float sigma = splat_sigma(con, d);

@@ -4,7 +4,9 @@
 // depth-sorted splats front to back on its own (no barrier, no shared memory): the splat
 // record is a uniform (broadcast) load, then the PX pixels are blended in order, exactly as
 // blend_fwd.glsl blends its one pixel, so per pixel the float operations and their order are
-// the same. The walk stops once every pixel of the subgroup is saturated (a uniform break).
+// the same. The walk stops once every pixel of the subgroup is saturated (a uniform break), and
+// skips the pixel rows a splat cannot reach (its record's `reach`, from alpha_extent: α < 1/255
+// there, so the skip changes nothing but the time).
 //
 // Why on lavapipe: a workgroup is ceil(WG/8) coroutines of 8 SIMD lanes, and every barrier()
 // suspends and resumes each of them; shared-memory accesses are per-lane scalar loops. The
@@ -19,6 +21,9 @@
 #include "raster.glsl"
 
 #define WG (TILE * TILE / PX)
+#if (TILE % WG) != 0
+#error "a pixel's row q / TILE must be uniform: WG must divide TILE"
+#endif
 layout(local_size_x = WG) in;
 
 #include "blend_fwd_io.glsl"
@@ -55,13 +60,18 @@ void main() {
         uint gid = ids[j]; // uniform: broadcast loads below
         vec4 a = splats[SPLAT_STRIDE * gid];
         vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
-        vec3 col = splats[SPLAT_STRIDE * gid + 2].rgb;
+        vec4 c4 = splats[SPLAT_STRIDE * gid + 2];
+        vec3 col = c4.rgb;
+        float reach = c4.w; // |dy| past which α < 1/255 (alpha_extent)
 #if FEAT > 0
         float f[FEAT];
         for (int c = 0; c < FEAT; ++c) f[c] = feat[gid * FEAT + c];
 #endif
         uint seen = j - range.x + 1u;
         for (int i = 0; i < PX; ++i) {
+            // A row the splat cannot reach is skipped whole (uniform: q / TILE = WG·i / TILE);
+            // dy is the d.y below, so a skipped pixel is one with α < 1/255.
+            if (abs(a.y - (float(origin.y + (WG * uint(i)) / TILE) + 0.5)) > reach) continue;
             if ((live & (1u << uint(i))) == 0u) continue;
             uint q = t + WG * uint(i);
             vec2 centre = vec2(origin + uvec2(q % TILE, q / TILE)) + 0.5;

@@ -3,7 +3,11 @@
 // radius and tile rectangle, view-dependent SH colour and sigmoid opacity (times op_scale[i]
 // when pc.opacity_scale: a transient's temporal weight). Culled Gaussians (opacity factor 0,
 // behind the near plane, degenerate covariance, off screen) touch zero tiles; a zero factor
-// culls before any projection work.
+// culls before any projection work. With pc.splat_extent the rectangle is opacity_rect's:
+// only the tiles where the blend can reach α ≥ 1/255 (none below opacity 1/255), so faint
+// Gaussians are binned to fewer tiles and every image and gradient stays the same; and the
+// splat record carries alpha_extent's y, with which the CPU blends skip the rows of a tile
+// the splat cannot reach.
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 #include "params.glsl"
@@ -61,9 +65,14 @@ void main() {
         col += b[k] * vec3(sh_rest[o], sh_rest[o + 1], sh_rest[o + 2]);
     }
     col = max(col + 0.5, vec3(0.0));
-    splats[SPLAT_STRIDE * i] = vec4(r.mean2d, r.p.z, sigmoid(logits[i]) * w);
+    float opacity = sigmoid(logits[i]) * w;
+    // The tiles binned: the 3σ square, or only those the blend can draw in (opacity_rect; the
+    // splat record, its radius and so its visibility stay the same either way).
+    uvec4 rect = pc.splat_extent != 0u ? opacity_rect(pc, r, opacity) : r.rect;
+    float reach = pc.splat_extent != 0u ? alpha_extent(r, opacity).y : EXTENT_NONE;
+    splats[SPLAT_STRIDE * i] = vec4(r.mean2d, r.p.z, opacity);
     splats[SPLAT_STRIDE * i + 1] = vec4(r.conic, r.radius);
-    splats[SPLAT_STRIDE * i + 2] = vec4(col, 0.0);
-    rects[i] = r.rect;
-    counts[i] = (r.rect.z - r.rect.x) * (r.rect.w - r.rect.y);
+    splats[SPLAT_STRIDE * i + 2] = vec4(col, reach);
+    rects[i] = rect;
+    counts[i] = (rect.z - rect.x) * (rect.w - rect.y);
 }

@@ -28,11 +28,13 @@ pub struct KernelSet {
     pub loss_blur: &'static str,
     /// The radix sort's digit passes (`DISPFLOW_SORT`).
     pub sort: &'static str,
+    /// The tiles a splat is binned to (`DISPFLOW_SPLAT_EXTENT`).
+    pub splat_extent: &'static str,
 }
 
 impl KernelSet {
     /// Each choice with the variable that carries it.
-    fn vars(&self) -> [(&'static str, &'static str); 6] {
+    fn vars(&self) -> [(&'static str, &'static str); 7] {
         use crate::kernels::{loss, mlp_rows, nodes, radix_sort, raster, shape::DeviceShape};
         [
             (mlp_rows::MlpKernels::ENV, self.mlp),
@@ -41,6 +43,7 @@ impl KernelSet {
             (nodes::GatherShape::ENV, self.nodes_gather),
             (loss::BlurShape::ENV, self.loss_blur),
             (radix_sort::SortShape::ENV, self.sort),
+            (raster::SplatExtent::ENV, self.splat_extent),
         ]
     }
 
@@ -59,8 +62,9 @@ impl KernelSet {
     }
 }
 
-/// The choice before issue 14 and the CPU default after it.
-pub const KERNEL_SETS: [KernelSet; 2] = [
+/// The choice before issue 14, the CPU set after it (3σ tile squares), and today's CPU
+/// default (the same kernels binning each splat to its opacity-aware box, issue 60).
+pub const KERNEL_SETS: [KernelSet; 3] = [
     KernelSet {
         name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
         mlp: "tiled",
@@ -69,16 +73,28 @@ pub const KERNEL_SETS: [KernelSet; 2] = [
         nodes_gather: "tree",
         loss_blur: "pixel",
         sort: "block",
+        splat_extent: "radius",
     },
     KernelSet {
         name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather + rows \
-               blur + serial sort",
+               blur + serial sort, 3σ tile squares",
         mlp: "rows",
         blend_fwd: "tile-regs",
         blend_bwd: "tile-accum",
         nodes_gather: "serial",
         loss_blur: "rows",
         sort: "serial",
+        splat_extent: "radius",
+    },
+    KernelSet {
+        name: "the same CPU kernels, opacity-aware tile boxes",
+        mlp: "rows",
+        blend_fwd: "tile-regs",
+        blend_bwd: "tile-accum",
+        nodes_gather: "serial",
+        loss_blur: "rows",
+        sort: "serial",
+        splat_extent: "opacity-box",
     },
 ];
 
@@ -225,10 +241,11 @@ pub fn make_quarter_transient(tr: &mut Trainer) -> Result<()> {
     tr.load_model(&g, &mlp, it)
 }
 
-/// The index in [`KERNEL_SETS`] of the set a device runs without overrides.
+/// The index in [`KERNEL_SETS`] of the set a device runs without overrides (on a GPU up to
+/// the splat extent: GPUs bin to the opacity-aware box too).
 pub fn default_set(gpu: &Gpu) -> usize {
     if gpu.info.kind == "CPU" {
-        1
+        2
     } else {
         0
     }
@@ -328,6 +345,20 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
     let find = |r: &StepRow, kernels: &str| {
         (rows.iter()).find(|b| b.scene == r.scene && b.method == r.method && b.kernels == kernels)
     };
+    let (squares, boxes) = (KERNEL_SETS[1].name, KERNEL_SETS[2].name);
+    for r in rows.iter().filter(|r| r.kernels == boxes) {
+        if let Some(b) = find(r, squares) {
+            println!(
+                "{} {}: binned to opacity-aware boxes the CPU step costs {:.2}× the one with 3σ \
+                 squares ({:.2} vs {:.2} ms)",
+                r.scene,
+                r.method,
+                r.median_ms / b.median_ms,
+                r.median_ms,
+                b.median_ms
+            );
+        }
+    }
     for r in rows.iter().filter(|r| r.kernels == TRANSIENT_ROW) {
         // The same kernels without transients.
         if let Some(b) = find(r, own) {

@@ -163,7 +163,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             isect_capacity,
             opacity_scale,
             feat_detach,
-            pad1,
+            splat_extent,
             pad2
         ),
         layout!(

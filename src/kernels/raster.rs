@@ -115,7 +115,8 @@ pub struct ProjectParams {
     pub opacity_scale: u32,
     /// 1: `d_op_scale` leaves out the feature channels' share of the opacity gradient.
     pub feat_detach: u32,
-    pub pad1: u32,
+    /// `SplatExtent` as a number: 0 the 3σ square, 1 the opacity-aware box.
+    pub splat_extent: u32,
     pub pad2: u32,
 }
 
@@ -282,6 +283,11 @@ impl RasterBuffers {
         Ok(gpu.read::<u32>(self.meta.elems::<u32>(1, 1))?[0])
     }
 
+    /// The tile rectangles `[x0, y0, x1, y1)` of the last forward's first `n` splats (tests).
+    pub fn tile_rects(&self, gpu: &Gpu, n: u32) -> Result<Vec<[u32; 4]>> {
+        gpu.read(self.rects.elems::<[u32; 4]>(0, n as u64))
+    }
+
     /// The u32 that is 1 when the last forward pass overflowed the intersection capacity,
     /// followed by the needed count: bind it as an optimiser's skip flag, or copy it out.
     pub fn overflow_flag(&self) -> BufSlice<'_> {
@@ -368,6 +374,40 @@ impl DeviceShape for BlendFwdVariant {
     }
 }
 
+/// Which tiles `project` bins a splat to, and which pixel rows of a tile the CPU-shaped blends
+/// (`TileRegs`, `TileAccum`) evaluate it at. Both give the same images and gradients (the blend
+/// draws no pixel outside the opacity-aware box; tests/raster_extent.rs compares them bit for
+/// bit); the box gives fewer tile intersections, so less binning, sorting and blending.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SplatExtent {
+    /// The square of the 3σ radius around the mean (3DGS); every row of a tile.
+    Radius,
+    /// The bounding box of the ellipse where α = opacity·exp(−σ) reaches 1/255, capped by the
+    /// 3σ square; none for opacity < 1/255 (`opacity_rect` in glsl/include/raster.glsl). The
+    /// CPU blends skip the rows of a tile outside the box (the splat record's `reach`).
+    OpacityBox,
+}
+
+impl SplatExtent {
+    pub const ALL: [SplatExtent; 2] = [SplatExtent::Radius, SplatExtent::OpacityBox];
+}
+
+/// The opacity-aware box on every device (fewer intersections, the same outputs);
+/// `DISPFLOW_SPLAT_EXTENT=radius|opacity-box` overrides it (`bench step` runs both).
+impl DeviceShape for SplatExtent {
+    const ENV: &'static str = "DISPFLOW_SPLAT_EXTENT";
+    const ALL: &'static [Self] = &SplatExtent::ALL;
+    const CPU: Self = SplatExtent::OpacityBox;
+    const GPU: Self = SplatExtent::OpacityBox;
+
+    fn name(self) -> &'static str {
+        match self {
+            SplatExtent::Radius => "radius",
+            SplatExtent::OpacityBox => "opacity-box",
+        }
+    }
+}
+
 pub struct Rasterizer {
     project: ComputePipeline,
     bin_total: ComputePipeline,
@@ -380,6 +420,7 @@ pub struct Rasterizer {
     blend_bwd: [[ComputePipeline; 4]; 2],
     blend_bwd_variant: BlendBwdVariant,
     project_bwd: ComputePipeline,
+    splat_extent: SplatExtent,
     scan: PrefixSum,
     sort: RadixSort,
 }
@@ -444,6 +485,7 @@ impl Rasterizer {
             ],
             blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
             project_bwd: gpu.pipeline(&r::PROJECT_BWD)?,
+            splat_extent: SplatExtent::for_device(&gpu.info),
             scan: PrefixSum::new(gpu)?,
             sort: RadixSort::new(gpu)?,
         })
@@ -467,6 +509,16 @@ impl Rasterizer {
     /// Chooses the blend-backward variant (benches and tests compare them on one device).
     pub fn set_blend_bwd_variant(&mut self, v: BlendBwdVariant) {
         self.blend_bwd_variant = v;
+    }
+
+    /// The tiles `forward` bins each splat to.
+    pub fn splat_extent(&self) -> SplatExtent {
+        self.splat_extent
+    }
+
+    /// Chooses the splat extent (tests and benches compare them on one device).
+    pub fn set_splat_extent(&mut self, e: SplatExtent) {
+        self.splat_extent = e;
     }
 
     /// Buffers for `s.max_gaussians` splats on a `s.width`×`s.height` image (grown by
@@ -561,7 +613,12 @@ impl Rasterizer {
         );
     }
 
-    fn project_params(b: &RasterBuffers, cam: &Camera, g: &SplatInputs<'_>) -> ProjectParams {
+    fn project_params(
+        &self,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+    ) -> ProjectParams {
         let (tiles_x, tiles_y) = cam.tiles();
         let row = |r: [f32; 3]| [r[0], r[1], r[2], 0.0];
         ProjectParams {
@@ -579,6 +636,7 @@ impl Rasterizer {
             sh_degree: g.sh_degree,
             isect_capacity: b.isect_capacity,
             opacity_scale: g.opacity_scale.is_some() as u32,
+            splat_extent: (self.splat_extent == SplatExtent::OpacityBox) as u32,
             ..Default::default()
         }
     }
@@ -622,7 +680,7 @@ impl Rasterizer {
         g: &SplatInputs<'_>,
     ) {
         Self::check(b, cam, g);
-        let pp = Self::project_params(b, cam, g);
+        let pp = self.project_params(b, cam, g);
         rec.dispatch_rows(
             &self.project,
             &pp,
@@ -653,7 +711,7 @@ impl Rasterizer {
         o: &RenderOpts,
     ) {
         Self::check(b, cam, g);
-        let pp = Self::project_params(b, cam, g);
+        let pp = self.project_params(b, cam, g);
         let bits = sort_bits(cam);
         self.scan.record(
             rec,
@@ -783,7 +841,7 @@ impl Rasterizer {
         Self::check(b, cam, g);
         let pp = ProjectParams {
             feat_detach: (o.detach_feature_weights && g.features.is_some()) as u32,
-            ..Self::project_params(b, cam, g)
+            ..self.project_params(b, cam, g)
         };
         rec.dispatch_rows(
             &self.project_bwd,

@@ -71,6 +71,7 @@ pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'s
         row::<MlpKernels>("MLP", info),
         row::<raster::BlendFwdVariant>("blend forward", info),
         row::<raster::BlendBwdVariant>("blend backward", info),
+        row::<raster::SplatExtent>("splat extent", info),
         row::<GatherShape>("node gather", info),
         row::<BlurShape>("loss blur", info),
         row::<radix_sort::SortShape>("radix sort", info),

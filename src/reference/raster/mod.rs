@@ -31,8 +31,8 @@ mod project;
 
 pub use blend::{blend_bwd, blend_bwd_f64, blend_fwd, blend_fwd_f64, BlendOut64};
 pub use project::{
-    project, project_bwd, project_bwd_f64, project_f64, project_scaled_bwd_f64, project_scaled_f64,
-    quat_to_rot,
+    alpha_extent, opacity_rect, project, project_bwd, project_bwd_f64, project_f64,
+    project_scaled_bwd_f64, project_scaled_f64, quat_to_rot, radius_rect,
 };
 
 /// Tile edge in pixels.
@@ -154,7 +154,8 @@ pub struct Projected {
     pub depth: Vec<f32>,
     /// `ceil(3·sqrt(λ_max))` pixels; 0 = culled.
     pub radius: Vec<u32>,
-    /// `[x0, y0, x1, y1)` in tiles; all zero when culled.
+    /// `[x0, y0, x1, y1)` in tiles (the opacity-aware box, [`opacity_rect`]); all zero when
+    /// culled or fainter than 1/255.
     pub tile_rect: Vec<[u32; 4]>,
     pub color: Vec<[f32; 3]>,
     /// `sigmoid(logit)`.

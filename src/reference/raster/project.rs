@@ -106,26 +106,77 @@ fn cam_rot(cam: &Camera) -> M3 {
     cam.rot.map(|r| r.map(f64::from))
 }
 
-/// Tile rectangle `[x0, y0, x1, y1)`, in f32 exactly as the GPU computes it.
-fn tile_rect(cam: &Camera, mean2d: [f64; 2], radius: u32) -> [u32; 4] {
+/// Tile rectangle `[x0, y0, x1, y1)` of the pixels within `ext` (x, y) of `mean2d`, in f32
+/// exactly as the GPU computes it.
+fn rect_within(cam: &Camera, mean2d: [f64; 2], ext: [f32; 2]) -> [u32; 4] {
     let (tiles_x, tiles_y) = cam.tiles();
-    let r = radius as f32;
     let t = TILE as f32;
     // `as i32` saturates; `+ 1` must too.
-    let lo = |m: f32| ((m - r) / t).floor() as i32;
-    let hi = |m: f32| (((m + r) / t).floor() as i32).saturating_add(1);
+    let lo = |m: f32, r: f32| ((m - r) / t).floor() as i32;
+    let hi = |m: f32, r: f32| (((m + r) / t).floor() as i32).saturating_add(1);
     let (mx, my) = (mean2d[0] as f32, mean2d[1] as f32);
     let cl = |v: i32, n: u32| v.clamp(0, n as i32) as u32;
     [
-        cl(lo(mx), tiles_x),
-        cl(lo(my), tiles_y),
-        cl(hi(mx), tiles_x),
-        cl(hi(my), tiles_y),
+        cl(lo(mx, ext[0]), tiles_x),
+        cl(lo(my, ext[1]), tiles_y),
+        cl(hi(mx, ext[0]), tiles_x),
+        cl(hi(my, ext[1]), tiles_y),
     ]
 }
 
-/// Forward for Gaussian `i`; `None` when culled.
-fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
+/// The 3σ square: the tiles within `radius` of `mean2d` (`Proj::rect` on the GPU,
+/// `SplatExtent::Radius`).
+pub fn radius_rect(cam: &Camera, mean2d: [f64; 2], radius: u32) -> [u32; 4] {
+    let r = radius as f32;
+    rect_within(cam, mean2d, [r, r])
+}
+
+/// Mirrors `EXTENT_LOG_SLACK` and `EXTENT_REL_SLACK` in glsl/include/raster.glsl.
+const EXTENT_LOG_SLACK: f32 = 1e-3;
+const EXTENT_REL_SLACK: f32 = 1.0 / 65536.0;
+
+/// Mirrors `EXTENT_NONE`: [`alpha_extent`] without a bound.
+pub const EXTENT_NONE: f32 = 1e30;
+
+/// Twin of `alpha_extent` (glsl/include/raster.glsl, read its comment), in f32 like the GPU:
+/// the half-extents (x, y) in pixels past which α = `opacity`·exp(−σ) < 1/255, from the dilated
+/// covariance's diagonal `cov_diag` (Σ2xx, Σ2yy); negative below opacity 1/255, [`EXTENT_NONE`]
+/// past the slack's growth limit.
+pub fn alpha_extent(cov_diag: [f64; 2], radius: u32, opacity: f64) -> [f32; 2] {
+    let op = opacity as f32;
+    if op.is_nan() || op < 1.0f32 / 255.0 {
+        return [-1.0; 2];
+    }
+    let r = radius as f32;
+    let kappa = r * r / (9.0 * DILATION as f32);
+    let grow = 1.0 + kappa * EXTENT_REL_SLACK;
+    if grow.is_nan() || grow > 1.5 {
+        return [EXTENT_NONE; 2];
+    }
+    let k = 2.0 * ((op * 255.0).ln() + EXTENT_LOG_SLACK);
+    cov_diag.map(|c| ((k * c as f32).sqrt() * grow + 0.5).ceil())
+}
+
+/// Twin of `opacity_rect`: the tiles of [`alpha_extent`]'s box capped by the 3σ square; none
+/// below opacity 1/255.
+pub fn opacity_rect(
+    cam: &Camera,
+    mean2d: [f64; 2],
+    cov_diag: [f64; 2],
+    radius: u32,
+    opacity: f64,
+) -> [u32; 4] {
+    let e = alpha_extent(cov_diag, radius, opacity);
+    if e[0] < 0.0 {
+        return [0; 4];
+    }
+    let r = radius as f32;
+    rect_within(cam, mean2d, e.map(|x| x.min(r)))
+}
+
+/// Forward for Gaussian `i`; `None` when culled. `factor`: the opacity factor the tile rectangle
+/// sees (the GPU's `op_scale[i]`; 1 without factors); `Fwd::opacity` is without it.
+fn project_one(cam: &Camera, g: &Gaussians64, i: usize, factor: f64) -> Option<Fwd> {
     let rot = cam_rot(cam);
     let mean = g.means[i];
     let mut p = [0.0; 3];
@@ -221,9 +272,9 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
     }
     let radius = radius_f as u32; // saturating
 
-    // 7. tile rectangle.
-    let rect = tile_rect(cam, mean2d, radius);
-    if rect[0] >= rect[2] || rect[1] >= rect[3] {
+    // 7. the 3σ square culls; what is binned is the opacity-aware box inside it (step 9).
+    let square = radius_rect(cam, mean2d, radius);
+    if square[0] >= square[2] || square[1] >= square[3] {
         return None;
     }
 
@@ -243,8 +294,11 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
     let color_raw = sh::eval(g.sh_degree, dir, coeffs);
     let color = color_raw.map(|c| (c + 0.5).max(0.0));
 
-    // 9. opacity.
+    // 9. opacity, and the tiles binned (the GPU's opacity with the factor, in f32).
     let opacity = sigmoid(g.opacity_logits[i]);
+    let op_drawn = (opacity as f32 * factor as f32) as f64;
+    let cov_diag = [sigma2[0][0], sigma2[1][1]];
+    let rect = opacity_rect(cam, mean2d, cov_diag, radius, op_drawn);
 
     Some(Fwd {
         p,
@@ -273,6 +327,8 @@ fn project_one(cam: &Camera, g: &Gaussians64, i: usize) -> Option<Fwd> {
 /// outputs to f32. The tile rectangle is computed in f32 from the rounded `mean2d` and `radius`
 /// like the GPU: `x0 = clamp(i32(floor((mx − r)/16)), 0, tiles_x)`,
 /// `x1 = clamp(i32(floor((mx + r)/16)) + 1, 0, tiles_x)`, same for y; an empty rectangle culls.
+/// What is kept is the opacity-aware box inside it ([`opacity_rect`], `SplatExtent::OpacityBox`,
+/// the GPU's default): empty for a visible Gaussian of opacity < 1/255.
 ///
 /// Culled (radius 0, empty rect, zero conic/colour/opacity): camera z < `near` or not finite,
 /// 2D determinant ≤ 0 or not finite, radius 0, no tile touched. A quaternion of norm < 1e-12 is
@@ -284,6 +340,12 @@ pub fn project(cam: &Camera, g: &Gaussians) -> Projected {
 /// [`project`] without rounding (the tile rectangle is still computed in f32 from the f32-rounded
 /// mean and radius, so it equals [`project`]'s).
 pub fn project_f64(cam: &Camera, g: &Gaussians64) -> Projected64 {
+    project_with(cam, g, |_| 1.0)
+}
+
+/// [`project_f64`] with the tile rectangles of opacities times `w(i)` (the factors are applied
+/// to the outputs by [`project_scaled_f64`]).
+fn project_with(cam: &Camera, g: &Gaussians64, w: impl Fn(usize) -> f64) -> Projected64 {
     g.check();
     let n = g.len();
     let mut out = Projected64 {
@@ -298,7 +360,7 @@ pub fn project_f64(cam: &Camera, g: &Gaussians64) -> Projected64 {
     };
     let mut hasher = std::collections::hash_map::DefaultHasher::new();
     for i in 0..n {
-        let Some(f) = project_one(cam, g, i) else {
+        let Some(f) = project_one(cam, g, i, w(i)) else {
             (i, false).hash(&mut hasher);
             continue;
         };
@@ -361,7 +423,7 @@ fn project_bwd_impl(
         if culled(i) {
             continue;
         }
-        let Some(f) = project_one(cam, g, i) else {
+        let Some(f) = project_one(cam, g, i, 1.0) else {
             continue;
         };
         let [x, y, z] = f.p;
@@ -484,7 +546,7 @@ fn project_bwd_impl(
 /// (the transients' temporal weights).
 pub fn project_scaled_f64(cam: &Camera, g: &Gaussians64, w: &[f64]) -> Projected64 {
     assert_eq!(w.len(), g.len(), "project_scaled: one factor per Gaussian");
-    let mut p = project_f64(cam, g);
+    let mut p = project_with(cam, g, |i| w[i]);
     for (i, &wi) in w.iter().enumerate() {
         if wi > 0.0 {
             p.opacity[i] *= wi;
