@@ -201,10 +201,24 @@ fn run_densify(
     dens.record_densify(&mut rec, &b, model.src(), model.dst(), n, s)
         .unwrap();
     rec.finish().unwrap();
+    read_out(gpu, layout, &model, &b, n, s, 0)
+}
+
+/// The step's outputs, the last `transients` of `count` rows read with their temporal
+/// sections (every row's when there are any).
+fn read_out(
+    gpu: &TestGpu,
+    layout: GaussianLayout,
+    model: &Model,
+    b: &DensifyBuffers,
+    n: u32,
+    s: &DensifySettings,
+    transients: u32,
+) -> GpuOut {
     let count = b.read_count(gpu).unwrap();
     assert!(count <= s.capacity, "count {count} > budget {}", s.capacity);
-    let dl =
-        |buf| HostGaussians::download(gpu, &layout, buf, Populations::split(count, 0)).unwrap();
+    let rows = Populations::split(count, transients);
+    let dl = |buf| HostGaussians::download(gpu, &layout, buf, rows).unwrap();
     GpuOut {
         count,
         actions: b.read_actions(gpu, n).unwrap(),
@@ -382,6 +396,87 @@ fn densify_step_matches_twin_every_case() {
             got.params.means.iter().flatten().all(|x| x.is_finite()),
             "{ctx}: non-finite means"
         );
+    }
+}
+
+/// The prune decided by given logits (`record_densify_pruning`, the transients' peak opacity
+/// over the sequence) against the twin: rows whose logit is under the floor go whatever their
+/// opacity, rows over it stay whatever theirs, the rows are written as they are, and the
+/// temporal sections (time centre and width, velocity) go with their rows through clones and
+/// splits, transients staying last.
+#[test]
+fn prune_by_given_logits_with_transients_matches_twin() {
+    let gpu = testing::gpu();
+    let (n, k, sh_degree) = (600usize, 200usize, 1u32);
+    let mut p = random_gaussians(21, n, sh_degree);
+    let mut m = random_moments(22, n, sh_degree);
+    let mut v = random_moments(23, n, sh_degree);
+    let mut r = Noise::new(24);
+    for g in [&mut p, &mut m, &mut v] {
+        g.transients = k;
+        for i in 0..n {
+            let t = i >= n - k; // canonical rows carry zeros, as in training
+            let mut u = || if t { r.uniform(-1.0, 1.0) } else { 0.0 };
+            g.time.push([u(), u()]);
+            g.velocity.push([u(), u(), u()]);
+        }
+    }
+    // Logits independent of the opacity: each way round somewhere.
+    let logits: Vec<f32> = (0..n).map(|_| r.uniform(-7.0, 3.0)).collect();
+    let layout = GaussianLayout::new(2 * n as u32 + 3, sh_degree);
+    let stats = random_stats(25, n, layout.capacity as usize);
+    let mut s = settings(layout.capacity);
+    s.max_screen_size = 0.0;
+    s.max_world_size = 0.0;
+    let want = twin::densify_pruning(&p, &m, &v, &stats, &s, Some(&logits));
+    let floor = s.params(n as u32).min_opacity_logit;
+    let pruned = |i: usize| want.decisions[i].keep == [false, false];
+    assert!(
+        (0..n).any(|i| pruned(i) && p.opacity[i] >= floor),
+        "no row pruned by its logit alone"
+    );
+    assert!(
+        (0..n).any(|i| !pruned(i) && p.opacity[i] < floor),
+        "no row kept by its logit alone"
+    );
+    let r = want.report;
+    assert!(r.cloned > 0 && r.split > 0 && r.pruned_opacity > 0, "{r:?}");
+    // Pruned, cloned and split transients: their count moved, some are left.
+    let t_out = want.params.transients;
+    assert!(t_out > 0 && t_out != k, "{t_out} transients of {k}: {r:?}");
+    let dens = Densifier::new(&gpu).unwrap();
+    let model = Model::new(&gpu, layout);
+    model.upload(&gpu, &p, &m, &v);
+    let b = dens.buffers(&gpu, layout.capacity).unwrap();
+    upload_stats(&gpu, &b, &stats);
+    let lb = gpu.buffer("prune logits", 4 * n as u64).unwrap();
+    gpu.upload(lb.elems::<f32>(0, n as u64), &logits).unwrap();
+    let mut rec = Recorder::new(&gpu).unwrap();
+    dens.record_densify_pruning(
+        &mut rec,
+        &b,
+        model.src(),
+        model.dst(),
+        n as u32,
+        &s,
+        Some(lb.all()),
+    )
+    .unwrap();
+    rec.finish().unwrap();
+    let t = want.params.transients as u32;
+    let got = read_out(&gpu, layout, &model, &b, n as u32, &s, t);
+    compare("prune by logits, with transients", &got, &want, &p);
+    for (what, g, w) in [
+        ("params", &got.params, &want.params),
+        ("m", &got.m, &want.m),
+        ("v", &got.v, &want.v),
+    ] {
+        let flat = |x: &HostGaussians| {
+            let t: Vec<f32> = x.time.iter().flatten().copied().collect();
+            let v: Vec<f32> = x.velocity.iter().flatten().copied().collect();
+            (bits(&t), bits(&v))
+        };
+        assert_eq!(flat(g), flat(w), "{what}: temporal sections");
     }
 }
 

@@ -209,6 +209,17 @@ pub fn decide(
     stats: &DensifyStats,
     s: &DensifySettings,
 ) -> (Vec<Decision>, DensifyReport) {
+    decide_pruning(params, stats, s, None)
+}
+
+/// [`decide`] with the prune's logits given (`record_densify_pruning`'s override: the
+/// transients' peak opacity); `None`: the parameters' own.
+pub fn decide_pruning(
+    params: &HostGaussians,
+    stats: &DensifyStats,
+    s: &DensifySettings,
+    prune_logits: Option<&[f32]>,
+) -> (Vec<Decision>, DensifyReport) {
     let n = params.len();
     let p = s.params(n as u32);
     let budget = p.capacity.saturating_sub(n as u32);
@@ -236,7 +247,7 @@ pub fn decide(
             }
             demanded
         };
-        let logit = params.opacity[i];
+        let logit = prune_logits.map_or(params.opacity[i], |l| l[i]);
         let rows: Vec<[bool; 3]> = match action {
             Action::Keep => vec![prune_reasons(&p, logit, stats.max_radii[i], ls)],
             Action::Clone => vec![
@@ -271,9 +282,13 @@ pub fn decide(
     (out, rep)
 }
 
-/// Appends row `i` of `src` to `dst` (every section).
+/// Appends row `i` of `src` to `dst` (every section; the temporal ones when `src` has them).
 fn push_row(dst: &mut HostGaussians, src: &HostGaussians, i: usize) {
     let r = 3 * (src.sh_coeffs as usize - 1);
+    if !src.time.is_empty() {
+        dst.time.push(src.time[i]);
+        dst.velocity.push(src.velocity[i]);
+    }
     dst.means.push(src.means[i]);
     dst.log_scales.push(src.log_scales[i]);
     dst.quats.push(src.quats[i]);
@@ -283,9 +298,13 @@ fn push_row(dst: &mut HostGaussians, src: &HostGaussians, i: usize) {
         .extend_from_slice(&src.sh_rest[i * r..(i + 1) * r]);
 }
 
-/// Appends a zero row (every section).
-fn push_zero(dst: &mut HostGaussians) {
+/// Appends a zero row (every section; the temporal ones when `temporal`).
+fn push_zero(dst: &mut HostGaussians, temporal: bool) {
     let r = 3 * (dst.sh_coeffs as usize - 1);
+    if temporal {
+        dst.time.push([0.0; 2]);
+        dst.velocity.push([0.0; 3]);
+    }
     dst.means.push([0.0; 3]);
     dst.log_scales.push([0.0; 3]);
     dst.quats.push([0.0; 4]);
@@ -304,7 +323,23 @@ pub fn densify(
     stats: &DensifyStats,
     s: &DensifySettings,
 ) -> DensifyOut {
-    let (decisions, report) = decide(params, stats, s);
+    densify_pruning(params, m, v, stats, s, None)
+}
+
+/// Twin of `record_densify_pruning`: [`densify`] deciding the prune by `prune_logits` (rows
+/// are written as they are). The temporal sections go with their rows when `params` has
+/// them; the last rows of `params` that are transients stay the last rows written.
+pub fn densify_pruning(
+    params: &HostGaussians,
+    m: &HostGaussians,
+    v: &HostGaussians,
+    stats: &DensifyStats,
+    s: &DensifySettings,
+    prune_logits: Option<&[f32]>,
+) -> DensifyOut {
+    let (decisions, report) = decide_pruning(params, stats, s, prune_logits);
+    let temporal = !params.time.is_empty();
+    let first_transient = params.populations().transient.start as usize;
     let empty = || HostGaussians {
         sh_coeffs: params.sh_coeffs,
         ..Default::default()
@@ -315,14 +350,15 @@ pub fn densify(
             if !keep {
                 continue;
             }
+            po.transients += (i >= first_transient) as usize;
             match (d.action, r) {
                 (Action::Split, c) => {
                     push_row(&mut po, params, i);
                     let last = po.len() - 1;
                     po.means[last] = split_mean(params, i, c as u32, s.seed, s.iteration);
                     po.log_scales[last] = params.log_scales[i].map(|l| l - LN_1_6);
-                    push_zero(&mut mo);
-                    push_zero(&mut vo);
+                    push_zero(&mut mo, temporal);
+                    push_zero(&mut vo, temporal);
                 }
                 (_, 0) => {
                     push_row(&mut po, params, i);
@@ -331,8 +367,8 @@ pub fn densify(
                 }
                 _ => {
                     push_row(&mut po, params, i);
-                    push_zero(&mut mo);
-                    push_zero(&mut vo);
+                    push_zero(&mut mo, temporal);
+                    push_zero(&mut vo, temporal);
                 }
             }
         }
