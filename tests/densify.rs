@@ -225,7 +225,7 @@ fn read_out(
         params: dl(&model.params_next),
         m: dl(&model.m_next),
         v: dl(&model.v_next),
-        stats_after: read_stats(gpu, &b, layout.capacity as usize),
+        stats_after: read_stats(gpu, b, layout.capacity as usize),
     }
 }
 
