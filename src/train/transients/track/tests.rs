@@ -258,3 +258,100 @@ fn a_straight_camera_path_tracks_a_still_surface_still() {
     assert!(speed < 0.2, "{t:?}");
     assert!(d < 0.35, "{t:?} is {d} from {p:?}");
 }
+
+/// The spawn and the forward agree with the tracker: a pixel tracked in frame 2 spawns a
+/// transient (`spawn::transients_of`) centred at frame 2's time with the track's point and
+/// velocity; the forward rule (`reference::temporal::forward`, the twin of the GPU's temporal
+/// stage) draws it at another frame's time exactly where the track says, P + v·(t_j − t); and
+/// there it lands on the ball in as many of the neighbours as the tracker asked to verify.
+#[test]
+fn a_tracked_transient_is_drawn_where_its_track_says_at_other_times() {
+    use crate::kernels::temporal::TemporalParams;
+    use crate::reference::temporal::{forward, TemporalInputs};
+    use crate::train::config::TransientConfig;
+    use crate::train::transients::spawn::{transients_of, SpawnFrame};
+    let bounds = cube();
+    let cams = five_cameras().map(|c| Camera {
+        fx: 2.0 * c.fx,
+        fy: 2.0 * c.fy,
+        cx: 2.0 * c.cx,
+        cy: 2.0 * c.cy,
+        width: 2 * c.width,
+        height: 2 * c.height,
+        ..c
+    });
+    let (p0, vel) = ([-0.3f32, 0.2, 0.1], [3.0f32, -1.5, 1.0]);
+    let times: Vec<f32> = (0..5).map(|i| i as f32 * 0.1).collect();
+    let pos = |t: f32| -> [f32; 3] { std::array::from_fn(|k| p0[k] + vel[k] * (t - 0.2)) };
+    let imgs: Vec<_> = (0..5)
+        .map(|i| frame(&cams[i], pos(times[i]), ORANGE))
+        .collect();
+    let res = |i: usize| Residual::new(&cams[i], times[i], &imgs[i].1, &imgs[i].0, 0.1);
+    let tr = Tracker::new(res(2), vec![res(1), res(3), res(0), res(4)], 100.0, &bounds);
+    let cfg = TransientConfig {
+        pixels: 6,
+        depths: 0, // only tracked pixels spawn
+        min_error: 0.1,
+        ..TransientConfig::default()
+    };
+    let f = SpawnFrame {
+        camera: &cams[2],
+        time: times[2],
+        render: &imgs[2].1,
+        gt: &imgs[2].0,
+    };
+    let (g, fs) = transients_of(&f, &cfg, &bounds, 0.1, 1, 100, Some(&tr));
+    assert!(fs.tracked > 0 && g.len() == fs.tracked, "{fs:?}");
+    let n = g.len();
+    let x = TemporalInputs {
+        means: g.means.iter().map(|m| m.map(f64::from)).collect(),
+        log_scales: g.log_scales.iter().map(|s| s.map(f64::from)).collect(),
+        quats: g.quats.iter().map(|q| q.map(f64::from)).collect(),
+        centre: g.time.iter().map(|t| t[0] as f64).collect(),
+        log_width: g.time.iter().map(|t| t[1] as f64).collect(),
+        velocity: g.velocity.iter().map(|v| v.map(f64::from)).collect(),
+    };
+    let mut hits = vec![0usize; n];
+    for j in [0usize, 1, 3, 4] {
+        let p = TemporalParams {
+            n: n as u32,
+            first: 0,
+            t: times[j],
+            log_floor: (0.01f32).ln(),
+            cutoff: 0.0,
+            ..Default::default()
+        };
+        let drawn = forward(&p, &x);
+        let w = cams[j].width;
+        for i in 0..n {
+            assert_eq!(
+                g.time[i][0], times[2],
+                "centred at the spawning frame's time"
+            );
+            let dt = times[j] - times[2];
+            let track: [f32; 3] = std::array::from_fn(|k| g.means[i][k] + g.velocity[i][k] * dt);
+            let m = drawn.means[i].expect("a transient row");
+            for k in 0..3 {
+                assert!(
+                    (m[k] - track[k] as f64).abs() < 1e-5,
+                    "frame {j}, transient {i}: drawn {m:?}, track {track:?}"
+                );
+            }
+            let (u, v) = pixel_of(&cams[j], m.map(|v| v as f32));
+            let on = (-1i32..=1).any(|dy| {
+                (-1i32..=1).any(|dx| {
+                    let (xx, yy) = (u as i32 + dx, v as i32 + dy);
+                    (0..w as i32).contains(&xx)
+                        && (0..cams[j].height as i32).contains(&yy)
+                        && imgs[j].0[(yy * w as i32 + xx) as usize] == ORANGE
+                })
+            });
+            hits[i] += on as usize;
+        }
+    }
+    assert!(
+        hits.iter().all(|&h| h >= tr.required()),
+        "frames each transient lands on the ball in: {hits:?} (the tracker asks {})",
+        tr.required()
+    );
+}
