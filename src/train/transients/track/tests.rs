@@ -346,7 +346,7 @@ fn a_tracked_transient_is_drawn_where_its_track_says_at_other_times() {
                         && imgs[j].0[(yy * w as i32 + xx) as usize] == ORANGE
                 })
             });
-            hits[i] += on as usize;
+            *hit += on as usize;
         }
     }
     assert!(
