@@ -323,7 +323,7 @@ fn a_tracked_transient_is_drawn_where_its_track_says_at_other_times() {
         };
         let drawn = forward(&p, &x);
         let w = cams[j].width;
-        for i in 0..n {
+        for (i, hit) in hits.iter_mut().enumerate() {
             assert_eq!(
                 g.time[i][0], times[2],
                 "centred at the spawning frame's time"
