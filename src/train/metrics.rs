@@ -92,6 +92,10 @@ pub struct Report {
     pub gaussians_canonical: Option<u32>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gaussians_transient: Option<u32>,
+    /// The iteration after which this launch first spawned transients (`--transients auto`:
+    /// when its gate opened); absent when none spawned.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub transients_first_spawn: Option<u32>,
     /// GPU ms per step by population (`train` only): static, deforming and transient rows
     /// drawn and what each costs, from the steps timed at the log lines of this launch
     /// (`train::cost`).
@@ -163,6 +167,7 @@ impl Report {
             rollbacks: 0,
             gaussians_canonical: None,
             gaussians_transient: None,
+            transients_first_spawn: None,
             cost_per_step: None,
             per_frame: per,
         }

@@ -265,6 +265,7 @@ fn finish(
         let g = &tr.model.gaussians;
         metrics.gaussians_canonical = Some(g.canonical_rows().len());
         metrics.gaussians_transient = Some(g.transient_rows().len());
+        metrics.transients_first_spawn = tr.transients_first_spawn();
     }
     // None when no step ran (a resumed run that had already finished).
     metrics.ms_per_step =

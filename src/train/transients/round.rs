@@ -11,10 +11,15 @@ use crate::train::config::TransientMode;
 use crate::train::Trainer;
 
 impl Trainer<'_> {
+    /// The iteration after which this launch first spawned transients.
+    pub fn transients_first_spawn(&self) -> Option<u32> {
+        self.looks.opened
+    }
+
     /// Whether transients have been spawned this run (`auto`'s gate is open): a spawn added
     /// rows, or the model holds some (a resumed run).
     fn transients_opened(&self) -> bool {
-        self.looks.opened || !self.model.gaussians.transient_rows().is_empty()
+        self.looks.opened.is_some() || !self.model.gaussians.transient_rows().is_empty()
     }
 }
 
@@ -148,7 +153,9 @@ impl Trainer<'_> {
             all.append(&t);
         }
         report.spawned = all.len();
-        self.looks.opened |= !all.is_empty();
+        if !all.is_empty() && self.looks.opened.is_none() {
+            self.looks.opened = Some(self.iteration);
+        }
         let first = self.model.gaussians.n;
         self.model.gaussians.append_transients(self.gpu, &all)?;
         if let Some(s) = self.passes.as_ref() {

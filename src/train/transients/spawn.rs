@@ -101,8 +101,8 @@ pub struct Looks {
     /// The candidates the next spawns look at again, and how many more times.
     recheck: Option<(Vec<usize>, u32)>,
     last: std::collections::HashMap<usize, (f64, u32)>,
-    /// Whether a spawn has added rows this run (`auto`'s gate is open).
-    pub opened: bool,
+    /// The iteration after which a spawn first added rows this launch (`auto`'s gate opened).
+    pub opened: Option<u32>,
 }
 
 /// What a look at a frame's residual decides (`transient.persist`).
