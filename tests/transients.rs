@@ -496,7 +496,11 @@ fn auto_spawns_once_a_residual_has_held_through_the_gate() {
     }
     let its: Vec<u32> = rounds.iter().map(|r| r.0).collect();
     assert_eq!(its, [60, 90, 120]);
-    assert_eq!(tr.transients_first_spawn(), Some(120), "metrics.json's record");
+    assert_eq!(
+        tr.transients_first_spawn(),
+        Some(120),
+        "metrics.json's record"
+    );
     let (_, first, held) = &rounds[0];
     assert!(
         first.looked_at > 0 && first.first_looks == first.looked_at,

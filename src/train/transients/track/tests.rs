@@ -50,6 +50,19 @@ fn five_cameras() -> [Camera; 5] {
     .map(look_at)
 }
 
+/// [`five_cameras`] at 128×128.
+fn five_cameras_128() -> [Camera; 5] {
+    five_cameras().map(|c| Camera {
+        fx: 2.0 * c.fx,
+        fy: 2.0 * c.fy,
+        cx: 2.0 * c.cx,
+        cy: 2.0 * c.cy,
+        width: 2 * c.width,
+        height: 2 * c.height,
+        ..c
+    })
+}
+
 /// The pixel `p` projects into.
 fn pixel_of(cam: &Camera, p: [f32; 3]) -> (u32, u32) {
     let q: [f32; 3] =
@@ -91,15 +104,7 @@ fn a_ball_missing_from_every_frame_is_tracked_with_its_velocity() {
     // its diameter) along a slanted line. At 128×128: at 64 px the ball is 3 px wide and a
     // pixel centre's half-pixel error alone is 0.06 units at its depth, up to 0.6 of velocity
     // over 0.1 s, more than the 15 % asked (the colour and the patch trackers both sat at it).
-    let cams = five_cameras().map(|c| Camera {
-        fx: 2.0 * c.fx,
-        fy: 2.0 * c.fy,
-        cx: 2.0 * c.cx,
-        cy: 2.0 * c.cy,
-        width: 2 * c.width,
-        height: 2 * c.height,
-        ..c
-    });
+    let cams = five_cameras_128();
     let (p0, vel) = ([-0.3f32, 0.2, 0.1], [3.0f32, -1.5, 1.0]);
     let speed = 3.5f32;
     let times: Vec<f32> = (0..5).map(|i| i as f32 * 0.1).collect();
@@ -271,15 +276,7 @@ fn a_tracked_transient_is_drawn_where_its_track_says_at_other_times() {
     use crate::train::config::TransientConfig;
     use crate::train::transients::spawn::{transients_of, SpawnFrame};
     let bounds = cube();
-    let cams = five_cameras().map(|c| Camera {
-        fx: 2.0 * c.fx,
-        fy: 2.0 * c.fy,
-        cx: 2.0 * c.cx,
-        cy: 2.0 * c.cy,
-        width: 2 * c.width,
-        height: 2 * c.height,
-        ..c
-    });
+    let cams = five_cameras_128();
     let (p0, vel) = ([-0.3f32, 0.2, 0.1], [3.0f32, -1.5, 1.0]);
     let times: Vec<f32> = (0..5).map(|i| i as f32 * 0.1).collect();
     let pos = |t: f32| -> [f32; 3] { std::array::from_fn(|k| p0[k] + vel[k] * (t - 0.2)) };
