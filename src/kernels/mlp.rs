@@ -1,5 +1,7 @@
 //! The deformation MLP, layer-wise implementation (`glsl/mlp/{encode,linear_fwd,
 //! linear_bwd_data,linear_bwd_weight,reduce_grad}.comp`). CPU twin: `reference::mlp`.
+//! (Over 600 lines: the forward, both backward halves and the gradient reduction share one
+//! scratch layout and its per-Linear offsets; split, each file would recompute them.)
 //!
 //! One dispatch per Linear, dims and offsets in push constants, so depth, width, skip and the
 //! time encoding are runtime configuration ([`MlpConfig`]). On GPUs every Linear is a 64×64-tiled

@@ -1,4 +1,6 @@
 //! Checkpoints (atomic: temp file + fsync + rename) and the standard 3DGS PLY export.
+//! (Over 600 lines: the checkpoint and the PLY share the blob names, the population split and
+//! the field-by-field checks of one model's sections; each reader has its tests here.)
 //!
 //! Checkpoint layout (format version [`CHECKPOINT_VERSION`]): magic `DFVKCKPT`, u64
 //! little-endian length of a JSON header, the header, u64 little-endian FNV-1a 64 of the
