@@ -3,13 +3,21 @@
 //! flag, backward), degenerate maps (flat, non-finite) and huge dynamic range.
 
 use dispflow_vk::kernels::motion::{
-    MotionNorm, NormBuffers, NormConfig, NormFlag, NormMode, DEFAULT_EPS,
+    MotionNorm, NormBuffers, NormConfig, NormFlag, NormMagShape, NormMode, DEFAULT_EPS,
 };
+use dispflow_vk::kernels::shape::DeviceShape;
 use dispflow_vk::reference::motion::{
     magnitudes, normalize_backward, normalize_f64, normalize_magnitudes, Normalized,
 };
 use dispflow_vk::testing::{self, max_abs, Noise, TestGpu};
 use dispflow_vk::vk::Recorder;
+
+/// The normalisation with each magnitude shape (tree, runs), whatever the device.
+fn norms(gpu: &TestGpu) -> Vec<MotionNorm> {
+    (NormMagShape::ALL.iter())
+        .map(|&s| MotionNorm::with_shape(gpu, s).unwrap())
+        .collect()
+}
 
 fn unit(r: &mut Noise) -> f64 {
     (r.next_u32() >> 8) as f64 / 16_777_216.0
@@ -223,7 +231,12 @@ fn check_against_twin(
 #[test]
 fn gpu_matches_twin() {
     let gpu = testing::gpu();
-    let norm = MotionNorm::new(&gpu).unwrap();
+    for norm in norms(&gpu) {
+        gpu_matches_twin_with(&gpu, &norm);
+    }
+}
+
+fn gpu_matches_twin_with(gpu: &TestGpu, norm: &MotionNorm) {
     let mut seed = 1;
     for (w, h) in [(1u32, 1u32), (17, 13), (64, 48)] {
         for channels in [2u32, 3] {
@@ -240,8 +253,12 @@ fn gpu_matches_twin() {
                     eps: DEFAULT_EPS,
                     detach_stats: false,
                 };
-                let out = run_gpu(&gpu, &norm, w, h, channels, &v, &g, cfg);
-                let ctx = format!("{w}x{h} C={channels} {}", mode.name());
+                let out = run_gpu(gpu, norm, w, h, channels, &v, &g, cfg);
+                let ctx = format!(
+                    "{w}x{h} C={channels} {} {}",
+                    mode.name(),
+                    norm.mag_shape().name()
+                );
                 let tw = check_against_twin(&ctx, &out, &v, &g, channels as usize, mode, 1e-6);
                 if n == 1 && mode == NormMode::MaxAbs {
                     assert_eq!(
@@ -277,7 +294,12 @@ fn gpu_matches_twin() {
 #[test]
 fn degenerate_maps_flag_and_zero() {
     let gpu = testing::gpu();
-    let norm = MotionNorm::new(&gpu).unwrap();
+    for norm in norms(&gpu) {
+        degenerate_maps_flag_and_zero_with(&gpu, &norm);
+    }
+}
+
+fn degenerate_maps_flag_and_zero_with(gpu: &TestGpu, norm: &MotionNorm) {
     let (w, h) = (9u32, 7u32);
     let n = (w * h) as usize;
     let g: Vec<f32> = field(3, n).iter().map(|&x| x as f32).collect();
@@ -332,8 +354,8 @@ fn degenerate_maps_flag_and_zero() {
             eps: DEFAULT_EPS,
             detach_stats: false,
         };
-        let out = run_gpu(&gpu, &norm, w, h, 2, v, &g, cfg);
-        let ctx = format!("{name} {}", mode.name());
+        let out = run_gpu(gpu, norm, w, h, 2, v, &g, cfg);
+        let ctx = format!("{name} {} {}", mode.name(), norm.mag_shape().name());
         assert_eq!(out.flag, want, "{ctx}");
         if want.is_degenerate() {
             assert!(out.m_hat.iter().all(|&x| x == 0.0), "{ctx}: m_hat not zero");
@@ -355,7 +377,7 @@ fn degenerate_maps_flag_and_zero() {
     let small: Vec<f32> = field(8, 2 * n).iter().map(|&x| (x * 1e-7) as f32).collect();
     for (eps, want) in [(DEFAULT_EPS, NormFlag::Flat), (0.0, NormFlag::Ok)] {
         let cfg = NormConfig::new(NormMode::MinMax, eps).unwrap();
-        let out = run_gpu(&gpu, &norm, w, h, 2, &small, &g, cfg);
+        let out = run_gpu(gpu, norm, w, h, 2, &small, &g, cfg);
         assert_eq!(out.flag, want, "spread 1e-7 at eps {eps}");
         if want == NormFlag::Ok {
             check_against_twin("small", &out, &small, &g, 2, NormMode::MinMax, 0.0);
@@ -366,7 +388,12 @@ fn degenerate_maps_flag_and_zero() {
 #[test]
 fn huge_dynamic_range_is_finite() {
     let gpu = testing::gpu();
-    let norm = MotionNorm::new(&gpu).unwrap();
+    for norm in norms(&gpu) {
+        huge_dynamic_range_is_finite_with(&gpu, &norm);
+    }
+}
+
+fn huge_dynamic_range_is_finite_with(gpu: &TestGpu, norm: &MotionNorm) {
     let (w, h) = (31u32, 17u32);
     let n = (w * h) as usize;
     let mut r = Noise::new(11);
@@ -392,12 +419,51 @@ fn huge_dynamic_range_is_finite() {
                 eps: DEFAULT_EPS,
                 detach_stats: false,
             };
-            let out = run_gpu(&gpu, &norm, w, h, 3, v, &g, cfg);
-            let ctx = format!("{name} {}", mode.name());
+            let out = run_gpu(gpu, norm, w, h, 3, v, &g, cfg);
+            let ctx = format!("{name} {} {}", mode.name(), norm.mag_shape().name());
             assert_eq!(out.flag, NormFlag::Ok, "{ctx}");
             check_against_twin(&ctx, &out, v, &g, 3, mode, DEFAULT_EPS as f64);
             for p in [0usize, 5, 77] {
                 assert_eq!(&out.dv[3 * p..3 * p + 3], &[0.0; 3], "{ctx}: |v| = 0");
+            }
+        }
+    }
+}
+
+/// The magnitude pass's shapes write the same bits: m, the statistics (ties broken by the
+/// first pixel), m̂ and the gradient, on maps whose magnitudes tie across workgroups and
+/// across a lane's run, with partial last groups, a non-finite pixel and every mode.
+#[test]
+fn both_magnitude_shapes_write_the_same_bits() {
+    let gpu = testing::gpu();
+    let [tree, runs] = &norms(&gpu)[..] else {
+        panic!("two shapes")
+    };
+    for (w, h) in [(17u32, 13u32), (33, 17), (64, 48)] {
+        let n = (w * h) as usize;
+        // Eight distinct magnitudes over every pixel: min and max tie hundreds of times.
+        let ties: Vec<f32> = (0..n)
+            .flat_map(|p| [((p * 7) % 8) as f32 * 0.125 + 0.5, 0.0])
+            .collect();
+        let noise: Vec<f32> = field(n as u64, 2 * n).iter().map(|&x| x as f32).collect();
+        let mut nan = noise.clone();
+        nan[2 * (n - 1)] = f32::NAN;
+        let g: Vec<f32> = field(9, n).iter().map(|&x| x as f32).collect();
+        for (name, v) in [("ties", &ties), ("noise", &noise), ("nan", &nan)] {
+            for mode in NormMode::ALL {
+                let cfg = NormConfig::new(mode, DEFAULT_EPS).unwrap();
+                let a = run_gpu(&gpu, tree, w, h, 2, v, &g, cfg);
+                let b = run_gpu(&gpu, runs, w, h, 2, v, &g, cfg);
+                let ctx = format!("{w}x{h} {name} {}", mode.name());
+                let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a.m), bits(&b.m), "{ctx}: m");
+                assert_eq!(format!("{:?}", a.stats), format!("{:?}", b.stats), "{ctx}");
+                assert_eq!(bits(&a.m_hat), bits(&b.m_hat), "{ctx}: m_hat");
+                assert_eq!(bits(&a.dv), bits(&b.dv), "{ctx}: gradient");
+                if name == "ties" && mode == NormMode::MinMax {
+                    // The first pixel of the smallest and of the largest magnitude.
+                    assert_eq!((a.stats.argmin, a.stats.argmax), (0, 1), "{ctx}");
+                }
             }
         }
     }

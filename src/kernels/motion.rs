@@ -40,6 +40,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::radix_sort::{KeyWidth, RadixSort, SortBuffers};
 use super::scan::Count;
+use super::shape::DeviceShape;
 use crate::error::{Error, Result};
 use crate::shaders;
 use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
@@ -245,8 +246,36 @@ pub(crate) fn grid(gpu: &Gpu, n: u32) -> (u32, u32) {
     (gx, gx * groups.div_ceil(gx))
 }
 
+/// The magnitude pass's shape (`norm_mag`); both write the same bits (min and max by
+/// (value, pixel) do not depend on the fold order).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NormMagShape {
+    /// 256 invocations per workgroup, one pixel each, a shared-memory tree (`norm_mag`).
+    Tree,
+    /// 8 invocations per workgroup, 32 pixels each folded in registers, one barrier
+    /// (`norm_mag_runs`): lavapipe runs a 256-wide workgroup's barriers as 32 coroutine
+    /// switches each.
+    Runs,
+}
+
+/// Runs on CPU devices, the tree elsewhere (override: `DISPFLOW_MOTION_NORM=tree|runs`).
+impl DeviceShape for NormMagShape {
+    const ENV: &'static str = "DISPFLOW_MOTION_NORM";
+    const ALL: &'static [Self] = &[NormMagShape::Tree, NormMagShape::Runs];
+    const CPU: Self = NormMagShape::Runs;
+    const GPU: Self = NormMagShape::Tree;
+
+    fn name(self) -> &'static str {
+        match self {
+            NormMagShape::Tree => "tree",
+            NormMagShape::Runs => "runs",
+        }
+    }
+}
+
 pub struct MotionNorm {
     mag: ComputePipeline,
+    mag_shape: NormMagShape,
     minmax: ComputePipeline,
     moments: ComputePipeline,
     finalize: ComputePipeline,
@@ -350,9 +379,18 @@ impl NormBuffers {
 
 impl MotionNorm {
     pub fn new(gpu: &Gpu) -> Result<Self> {
+        Self::with_shape(gpu, NormMagShape::for_device(&gpu.info))
+    }
+
+    /// With the magnitude pass in `shape` whatever the device (tests, benches).
+    pub fn with_shape(gpu: &Gpu, shape: NormMagShape) -> Result<Self> {
         use shaders::motion as s;
         Ok(MotionNorm {
-            mag: gpu.pipeline(&s::NORM_MAG)?,
+            mag: gpu.pipeline(match shape {
+                NormMagShape::Tree => &s::NORM_MAG,
+                NormMagShape::Runs => &s::NORM_MAG_RUNS,
+            })?,
+            mag_shape: shape,
             minmax: gpu.pipeline(&s::NORM_MINMAX)?,
             moments: gpu.pipeline(&s::NORM_MOMENTS)?,
             finalize: gpu.pipeline(&s::NORM_FINALIZE)?,
@@ -362,6 +400,11 @@ impl MotionNorm {
             bwd: gpu.pipeline(&s::NORM_BWD)?,
             sort: RadixSort::new(gpu)?,
         })
+    }
+
+    /// The magnitude pass's shape.
+    pub fn mag_shape(&self) -> NormMagShape {
+        self.mag_shape
     }
 
     /// Allocates the scratch for `width × height` maps of `channels` (2 or 3) floats per pixel.

@@ -66,7 +66,8 @@ pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'s
     ) -> (&'static str, &'static str, &'static str) {
         (what, S::for_device(info).name(), S::ENV)
     }
-    use super::{loss::BlurShape, mlp_rows::MlpKernels, nodes::GatherShape, radix_sort, raster};
+    use super::{loss::BlurShape, mlp_rows::MlpKernels, motion::NormMagShape, nodes::GatherShape};
+    use super::{radix_sort, raster};
     vec![
         row::<MlpKernels>("MLP", info),
         row::<raster::BlendFwdVariant>("blend forward", info),
@@ -74,6 +75,7 @@ pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'s
         row::<raster::SplatExtent>("splat extent", info),
         row::<GatherShape>("node gather", info),
         row::<BlurShape>("loss blur", info),
+        row::<NormMagShape>("motion magnitude", info),
         row::<radix_sort::SortShape>("radix sort", info),
     ]
 }
