@@ -2,31 +2,34 @@
 //! threshold (at least `min_error` and [`RELATIVE_ERROR`] times the frame's median) and the
 //! frame's localized residual. Spawning and the tracker apply the same rule.
 
-/// The localized residual of a render: the summed error of the pixels that [`worst_pixels`]
-/// would spawn from (0 when the frame is wrong everywhere alike, or right everywhere).
-pub fn local_residual(render: &[[f32; 4]], gt: &[[f32; 4]], min_error: f32) -> f64 {
-    let err = pixel_errors(render, gt);
-    let thr = threshold(&err, min_error);
-    err.iter().filter(|&&e| e >= thr).map(|&e| e as f64).sum()
+/// What a render gets wrong, in one pass over its errors: the localized residual (the summed
+/// error of the pixels [`worst_pixels`] would spawn from; 0 when the frame is wrong everywhere
+/// alike, or right everywhere) and the share of those pixels where the render draws nothing
+/// (coverage 1 − T, its alpha, under one half: an object missing from the model there, rather
+/// than one drawn wrong; 0 when no pixel is over the threshold).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameResidual {
+    pub sum: f64,
+    pub uncovered: f64,
 }
 
-/// The share of the pixels [`worst_pixels`] would spawn from where the render draws nothing
-/// (coverage 1 − T, its alpha, under one half): an object missing from the model there,
-/// rather than one drawn wrong (0 when no pixel is over the threshold).
-pub fn uncovered_share(render: &[[f32; 4]], gt: &[[f32; 4]], min_error: f32) -> f64 {
+pub fn frame_residual(render: &[[f32; 4]], gt: &[[f32; 4]], min_error: f32) -> FrameResidual {
     let err = pixel_errors(render, gt);
     let thr = threshold(&err, min_error);
-    let (mut over, mut bare) = (0usize, 0usize);
-    for (e, r) in err.iter().zip(render) {
-        if *e >= thr {
+    let (mut sum, mut over, mut bare) = (0.0f64, 0usize, 0usize);
+    for (&e, r) in err.iter().zip(render) {
+        if e >= thr {
+            sum += e as f64;
             over += 1;
             bare += (r[3] < 0.5) as usize;
         }
     }
-    if over == 0 {
-        return 0.0;
-    }
-    bare as f64 / over as f64
+    let uncovered = if over == 0 {
+        0.0
+    } else {
+        bare as f64 / over as f64
+    };
+    FrameResidual { sum, uncovered }
 }
 
 /// The error a pixel needs to spawn: at least `min_error` and [`RELATIVE_ERROR`] times the
@@ -106,9 +109,9 @@ mod tests {
         let mut r = gt.clone();
         r[7] = [0.9; 4];
         r[8] = [0.6; 4];
-        assert!((local_residual(&r, &gt, 0.1) - 1.5).abs() < 1e-6);
+        assert!((frame_residual(&r, &gt, 0.1).sum - 1.5).abs() < 1e-6);
         // Wrong everywhere alike: nothing local.
-        assert_eq!(local_residual(&vec![[0.5f32; 4]; 100], &gt, 0.1), 0.0);
+        assert_eq!(frame_residual(&vec![[0.5f32; 4]; 100], &gt, 0.1).sum, 0.0);
     }
 
     #[test]
@@ -121,8 +124,12 @@ mod tests {
         }
         // A right pixel left bare does not count.
         r[50][3] = 0.0;
-        assert!((uncovered_share(&r, &gt, 0.1) - 0.75).abs() < 1e-12);
-        assert_eq!(uncovered_share(&gt, &gt, 0.1), 0.0, "nothing wrong");
+        assert!((frame_residual(&r, &gt, 0.1).uncovered - 0.75).abs() < 1e-12);
+        assert_eq!(
+            frame_residual(&gt, &gt, 0.1),
+            FrameResidual::default(),
+            "nothing wrong"
+        );
     }
 
     #[test]

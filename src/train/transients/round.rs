@@ -2,7 +2,7 @@
 //! persists, track their wrong pixels through the temporal neighbours and append the
 //! transients they back-project into free rows of the budget.
 
-use super::residual::{local_residual, uncovered_share};
+use super::residual::frame_residual;
 use super::spawn::{transients_of, SpawnFrame, SpawnReport, Verdict};
 use super::track::{Residual, Tracker};
 use crate::error::Result;
@@ -72,22 +72,20 @@ impl Trainer<'_> {
             let Some((render, gt)) = self.shot(i, view)? else {
                 continue;
             };
-            let r = local_residual(&render, &gt, tc.min_error);
+            let r = frame_residual(&render, &gt, tc.min_error);
             shots.push((r, i, render, gt));
         }
         report.looked_at = shots.len();
-        shots.retain(|s| match self.looks.judge(s.1, s.0, tc.persist, need) {
+        shots.retain(|s| match self.looks.judge(s.1, s.0.sum, tc.persist, need) {
             // A closed gate opens only where the model draws nothing, over a region that
             // matters (the residual per pixel of the frame).
             Verdict::Spawn
-                if closed && (s.0 / s.2.len().max(1) as f64) < tc.min_residual as f64 =>
+                if closed && (s.0.sum / s.2.len().max(1) as f64) < tc.min_residual as f64 =>
             {
                 report.small += 1;
                 false
             }
-            Verdict::Spawn
-                if closed && uncovered_share(&s.2, &s.3, tc.min_error) < tc.uncovered as f64 =>
-            {
+            Verdict::Spawn if closed && s.0.uncovered < tc.uncovered as f64 => {
                 report.covered += 1;
                 false
             }
@@ -105,9 +103,9 @@ impl Trainer<'_> {
                 false
             }
         });
-        shots.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        shots.sort_by(|a, b| b.0.sum.total_cmp(&a.0.sum).then(a.1.cmp(&b.1)));
         shots.truncate(tc.frames as usize);
-        shots.retain(|s| s.0 > 0.0);
+        shots.retain(|s| s.0.sum > 0.0);
         // Tracking reads the spawning frames' temporal neighbours too.
         let mut near = std::collections::BTreeMap::new();
         for s in &shots {
@@ -147,7 +145,7 @@ impl Trainer<'_> {
             let sh = self.model.gaussians.layout.sh_coeffs;
             let (t, fs) =
                 transients_of(&sf, &tc, &self.bounds, spacing, sh, left, tracker.as_ref());
-            report.frames.push((f.id.clone(), *r, fs.picked));
+            report.frames.push((f.id.clone(), r.sum, fs.picked));
             report.tracked += fs.tracked;
             report.over_budget += fs.over;
             all.append(&t);
