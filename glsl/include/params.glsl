@@ -206,6 +206,19 @@ struct ProjectParams {
     uint pad2;
 };
 
+// src/kernels/binning.rs — depth-first binning (CPU shape): bin_depth_keys, bin_tile_count,
+// bin_tile_scatter. Tile rows are split into bands of `band_rows`, one serial invocation each.
+struct BinParams {
+    uint tiles_x;
+    uint tiles_y;
+    uint num_gaussians;
+    uint isect_capacity;
+    uint band_rows;
+    uint bands;
+    uint pad0;
+    uint pad1;
+};
+
 // src/kernels/raster.rs — per-tile α-blending, forward and backward.
 struct BlendParams {
     vec4 background;  // rgb; w unused

@@ -2,8 +2,9 @@
 //! Over 600 lines: forward, backward and the overflow re-run share one buffer set and its
 //! capacity contract; split, each part would restate which pass fills which buffer.
 //!
-//! Forward: `project` → scan of tiles touched → `bin_total` → `bin_emit` ((tile | depth) keys)
-//! → radix sort (only `32 + tile_bits` bits) → `bin_ranges` → `blend_fwd` (one of
+//! Forward: `project` → binning (one of `Binning`; the radix path: scan of tiles touched →
+//! `bin_total` → `bin_emit` ((tile | depth) keys) → radix sort (only `32 + tile_bits` bits) →
+//! `bin_ranges`; the depth-first path in `binning.rs`) → `blend_fwd` (one of
 //! `BlendFwdVariant`).
 //! Backward: `blend_bwd` (accumulates per-splat 2D gradients; one of `BlendBwdVariant`) →
 //! `project_bwd`.
@@ -17,6 +18,8 @@
 
 use bytemuck::{Pod, Zeroable};
 
+pub use super::binning::Binning;
+use super::binning::{BinIo, DepthFirst, DepthFirstBuffers};
 use super::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use super::scan::{Count, PrefixSum, ScanScratch};
 pub use super::shape::DeviceShape;
@@ -233,6 +236,7 @@ pub struct RasterBuffers {
     meta: Buffer,
     scan: ScanScratch,
     sort: SortBuffers,
+    depth_first: DepthFirstBuffers,
     ranges: Buffer,
     /// [H·W] vec4: rgb (background included) and alpha = 1 − T.
     pub out_rgba: Buffer,
@@ -288,6 +292,21 @@ impl RasterBuffers {
         gpu.read(self.rects.elems::<[u32; 4]>(0, n as u64))
     }
 
+    /// Per tile `[start, end)` in the intersection list of the last forward ((0, 0) for a tile
+    /// without entries; tests).
+    pub fn tile_ranges(&self, gpu: &Gpu) -> Result<Vec<[u32; 2]>> {
+        let (tx, ty) = (self.width.div_ceil(TILE), self.height.div_ceil(TILE));
+        gpu.read(self.ranges.elems::<[u32; 2]>(0, tx as u64 * ty as u64))
+    }
+
+    /// The Gaussian id of every tile intersection of the last forward, tile by tile, front to
+    /// back (what the blends walk; tests). Read after its submit; at most the capacity.
+    pub fn intersection_ids(&self, gpu: &Gpu) -> Result<Vec<u32>> {
+        let m = self.intersections(gpu)?.min(self.isect_capacity);
+        let out = isect_out(self.width, self.height);
+        gpu.read(self.sort.vals[out].elems::<u32>(0, m as u64))
+    }
+
     /// The u32 that is 1 when the last forward pass overflowed the intersection capacity,
     /// followed by the needed count: bind it as an optimiser's skip flag, or copy it out.
     pub fn overflow_flag(&self) -> BufSlice<'_> {
@@ -295,10 +314,15 @@ impl RasterBuffers {
     }
 }
 
-fn sort_bits(cam: &Camera) -> u32 {
-    let (tx, ty) = cam.tiles();
-    let tiles = (tx * ty).max(2);
+fn sort_bits(width: u32, height: u32) -> u32 {
+    let tiles = (width.div_ceil(TILE) * height.div_ceil(TILE)).max(2);
     32 + (32 - (tiles - 1).leading_zeros())
+}
+
+/// Which of `sort.vals` holds the intersection list the blends read: the radix sort's output,
+/// where the depth-first path writes its list too (so the backward needs no binning choice).
+fn isect_out(width: u32, height: u32) -> usize {
+    (passes(sort_bits(width, height)) % 2) as usize
 }
 
 /// How `blend_bwd` folds per-pixel gradient terms into per-splat sums. All variants compute
@@ -421,6 +445,8 @@ pub struct Rasterizer {
     blend_bwd_variant: BlendBwdVariant,
     project_bwd: ComputePipeline,
     splat_extent: SplatExtent,
+    binning: Binning,
+    depth_first: DepthFirst,
     scan: PrefixSum,
     sort: RadixSort,
 }
@@ -486,6 +512,8 @@ impl Rasterizer {
             blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
             project_bwd: gpu.pipeline(&r::PROJECT_BWD)?,
             splat_extent: SplatExtent::for_device(&gpu.info),
+            binning: Binning::for_device(&gpu.info),
+            depth_first: DepthFirst::new(gpu)?,
             scan: PrefixSum::new(gpu)?,
             sort: RadixSort::new(gpu)?,
         })
@@ -519,6 +547,16 @@ impl Rasterizer {
     /// Chooses the splat extent (tests and benches compare them on one device).
     pub fn set_splat_extent(&mut self, e: SplatExtent) {
         self.splat_extent = e;
+    }
+
+    /// How `forward` bins splats to tiles.
+    pub fn binning(&self) -> Binning {
+        self.binning
+    }
+
+    /// Chooses the binning (tests and benches compare them on one device; buffers serve both).
+    pub fn set_binning(&mut self, b: Binning) {
+        self.binning = b;
     }
 
     /// Buffers for `s.max_gaussians` splats on a `s.width`×`s.height` image (grown by
@@ -562,6 +600,9 @@ impl Rasterizer {
                 isect_capacity.max(1),
                 KeyWidth::U64,
             )?,
+            depth_first: self
+                .depth_first
+                .buffers(gpu, &self.sort, max_gaussians, tiles)?,
             ranges: gpu.buffer("raster tile ranges", tiles * 8)?,
             out_rgba: gpu.buffer("raster out rgba", px * 16)?,
             out_depth: gpu.buffer("raster out depth", px * f)?,
@@ -711,8 +752,59 @@ impl Rasterizer {
         o: &RenderOpts,
     ) {
         Self::check(b, cam, g);
+        // Timed as its own zone (`bench step` compares the binning shapes).
+        let outer = rec.set_zone("");
+        rec.set_zone(&format!("{outer} binning").trim_start().to_string());
+        match self.binning {
+            Binning::Radix => self.bin_radix(rec, b, cam, g),
+            Binning::DepthFirst => {
+                let (tx, ty) = cam.tiles();
+                let p = DepthFirst::params(tx, ty, g.n, b.isect_capacity);
+                let io = BinIo {
+                    splats: b.splats.all(),
+                    rects: b.rects.all(),
+                    ranges: b.ranges.all(),
+                    ids: b.sort.vals[isect_out(cam.width, cam.height)].all(),
+                    meta: b.meta.all(),
+                };
+                self.depth_first
+                    .record(rec, &self.sort, &b.depth_first, &p, &io);
+            }
+        }
+        rec.set_zone(&outer);
+        let out = isect_out(cam.width, cam.height);
+        let bp = Self::blend_params(cam, g, o);
+        let (tx, ty) = cam.tiles();
+        let mut binds = vec![
+            b.ranges.all(),
+            b.sort.vals[out].all(),
+            b.splats.all(),
+            b.out_rgba.all(),
+            b.out_depth.all(),
+            b.final_t.all(),
+            b.n_contrib.all(),
+        ];
+        if let Some((f, _)) = g.features {
+            binds.extend([f, b.out_features.all()]);
+        }
+        rec.dispatch(
+            &self.blend_fwd[self.blend_fwd_variant as usize][variant(g.feature_dims()).unwrap()],
+            &bp,
+            &binds,
+            [tx.max(1), ty.max(1), 1],
+        );
+    }
+
+    /// The radix binning: (tile | depth) keys per intersection, sorted, then the ranges.
+    fn bin_radix(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+    ) {
         let pp = self.project_params(b, cam, g);
-        let bits = sort_bits(cam);
+        let bits = sort_bits(cam.width, cam.height);
         self.scan.record(
             rec,
             &b.scan,
@@ -749,26 +841,6 @@ impl Rasterizer {
             &[b.meta.all(), b.sort.keys[out].all(), b.ranges.all()],
             b.meta.slice(16, 12),
         );
-        let bp = Self::blend_params(cam, g, o);
-        let (tx, ty) = cam.tiles();
-        let mut binds = vec![
-            b.ranges.all(),
-            b.sort.vals[out].all(),
-            b.splats.all(),
-            b.out_rgba.all(),
-            b.out_depth.all(),
-            b.final_t.all(),
-            b.n_contrib.all(),
-        ];
-        if let Some((f, _)) = g.features {
-            binds.extend([f, b.out_features.all()]);
-        }
-        rec.dispatch(
-            &self.blend_fwd[self.blend_fwd_variant as usize][variant(g.feature_dims()).unwrap()],
-            &bp,
-            &binds,
-            [tx.max(1), ty.max(1), 1],
-        );
     }
 
     /// Records the backward pass of the last `forward` (same inputs): `b.grad2d`,
@@ -802,7 +874,7 @@ impl Rasterizer {
             g.features.is_some(),
             "feature gradients given iff features are"
         );
-        let out = (passes(sort_bits(cam)) % 2) as usize;
+        let out = isect_out(cam.width, cam.height);
         let bp = Self::blend_params(cam, g, o);
         let (tx, ty) = cam.tiles();
         rec.fill(b.grad2d.all(), 0);
