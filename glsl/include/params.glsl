@@ -206,17 +206,13 @@ struct ProjectParams {
     uint pad2;
 };
 
-// src/kernels/binning.rs — depth-first binning (CPU shape): bin_depth_keys, bin_tile_count,
-// bin_tile_scatter. Tile rows are split into bands of `band_rows`, one serial invocation each.
+// src/kernels/binning.rs — depth-first binning: bin_depth_keys, bin_depth_counts,
+// bin_emit_depth.
 struct BinParams {
     uint tiles_x;
     uint tiles_y;
     uint num_gaussians;
     uint isect_capacity;
-    uint band_rows;
-    uint bands;
-    uint pad0;
-    uint pad1;
 };
 
 // src/kernels/raster.rs — per-tile α-blending, forward and backward.

@@ -152,11 +152,7 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             tiles_x,
             tiles_y,
             num_gaussians,
-            isect_capacity,
-            band_rows,
-            bands,
-            pad0,
-            pad1
+            isect_capacity
         ),
         layout!(
             raster::ProjectParams,

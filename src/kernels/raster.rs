@@ -2,10 +2,10 @@
 //! Over 600 lines: forward, backward and the overflow re-run share one buffer set and its
 //! capacity contract; split, each part would restate which pass fills which buffer.
 //!
-//! Forward: `project` → binning (one of `Binning`; the radix path: scan of tiles touched →
-//! `bin_total` → `bin_emit` ((tile | depth) keys) → radix sort (only `32 + tile_bits` bits) →
-//! `bin_ranges`; the depth-first path in `binning.rs`) → `blend_fwd` (one of
-//! `BlendFwdVariant`).
+//! Forward: `project` → binning, one of `Binning` (radix: scan of tiles touched → `bin_total`
+//! → `bin_emit` ((tile | depth) keys) → radix sort (only `32 + tile_bits` bits); depth first:
+//! depth sort of the Gaussians → `bin_depth_counts` → scan → `bin_total` → `bin_emit_depth` →
+//! radix sort of the tile bits; both → `bin_ranges`) → `blend_fwd` (one of `BlendFwdVariant`).
 //! Backward: `blend_bwd` (accumulates per-splat 2D gradients; one of `BlendBwdVariant`) →
 //! `project_bwd`.
 //! Nothing is read back inside a pass; the intersection count drives the sort and the range
@@ -19,7 +19,7 @@
 use bytemuck::{Pod, Zeroable};
 
 pub use super::binning::Binning;
-use super::binning::{BinIo, DepthFirst, DepthFirstBuffers};
+use super::binning::{BinParams, DepthFirst, DepthFirstBuffers};
 use super::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use super::scan::{Count, PrefixSum, ScanScratch};
 pub use super::shape::DeviceShape;
@@ -319,8 +319,9 @@ fn sort_bits(width: u32, height: u32) -> u32 {
     32 + (32 - (tiles - 1).leading_zeros())
 }
 
-/// Which of `sort.vals` holds the intersection list the blends read: the radix sort's output,
-/// where the depth-first path writes its list too (so the backward needs no binning choice).
+/// Which of `sort.keys`/`sort.vals` holds the sorted intersections the blends read: both
+/// binnings end in the same buffer (the depth-first tile sort runs a whole number of digit
+/// passes fewer), so the backward needs no binning choice.
 fn isect_out(width: u32, height: u32) -> usize {
     (passes(sort_bits(width, height)) % 2) as usize
 }
@@ -600,9 +601,7 @@ impl Rasterizer {
                 isect_capacity.max(1),
                 KeyWidth::U64,
             )?,
-            depth_first: self
-                .depth_first
-                .buffers(gpu, &self.sort, max_gaussians, tiles)?,
+            depth_first: self.depth_first.buffers(gpu, &self.sort, max_gaussians)?,
             ranges: gpu.buffer("raster tile ranges", tiles * 8)?,
             out_rgba: gpu.buffer("raster out rgba", px * 16)?,
             out_depth: gpu.buffer("raster out depth", px * f)?,
@@ -757,19 +756,7 @@ impl Rasterizer {
         rec.set_zone(&format!("{outer} binning").trim_start().to_string());
         match self.binning {
             Binning::Radix => self.bin_radix(rec, b, cam, g),
-            Binning::DepthFirst => {
-                let (tx, ty) = cam.tiles();
-                let p = DepthFirst::params(tx, ty, g.n, b.isect_capacity);
-                let io = BinIo {
-                    splats: b.splats.all(),
-                    rects: b.rects.all(),
-                    ranges: b.ranges.all(),
-                    ids: b.sort.vals[isect_out(cam.width, cam.height)].all(),
-                    meta: b.meta.all(),
-                };
-                self.depth_first
-                    .record(rec, &self.sort, &b.depth_first, &p, &io);
-            }
+            Binning::DepthFirst => self.bin_depth_first(rec, b, cam, g),
         }
         rec.set_zone(&outer);
         let out = isect_out(cam.width, cam.height);
@@ -834,10 +821,68 @@ impl Rasterizer {
             .sort
             .record(rec, &b.sort, Count::Gpu(b.meta.slice(0, 4)), bits);
         debug_assert_eq!(out, (passes(bits) % 2) as usize);
+        self.bin_ranges(rec, b, &pp, out);
+    }
+
+    /// The depth-first binning (`binning.rs`): the Gaussians sorted by depth, their keys
+    /// emitted in that order, then sorted by the tile bits only; the same keys, ids and
+    /// ranges as `bin_radix`.
+    fn bin_depth_first(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+    ) {
+        let pp = self.project_params(b, cam, g);
+        let (tiles_x, tiles_y) = cam.tiles();
+        let p = BinParams {
+            tiles_x,
+            tiles_y,
+            num_gaussians: g.n,
+            isect_capacity: b.isect_capacity,
+        };
+        let (k, d) = (&self.depth_first, &b.depth_first);
+        let keys = [b.splats.all(), d.sort.keys[0].all(), d.sort.vals[0].all()];
+        rec.dispatch_rows(&k.keys, &p, &keys, g.n);
+        let order = d.sort.vals[self.sort.record(rec, &d.sort, Count::Host(g.n), 32)].all();
+        let counts = [order, b.counts.all(), d.counts.all()];
+        rec.dispatch_rows(&k.counts, &p, &counts, g.n);
+        // `offsets` as the radix path uses it, but in depth order.
+        let (counts, offsets) = (d.counts.all(), b.offsets.all());
+        self.scan
+            .record(rec, &b.scan, counts, offsets, Count::Host(g.n));
+        let total = [offsets, counts, b.meta.all()];
+        rec.dispatch(&self.bin_total, &pp, &total, [1, 1, 1]);
+        let emit = [
+            b.splats.all(),
+            b.rects.all(),
+            order,
+            offsets,
+            b.sort.keys[0].all(),
+            b.sort.vals[0].all(),
+        ];
+        rec.dispatch_rows(&k.emit, &p, &emit, g.n);
+        let count = Count::Gpu(b.meta.slice(0, 4));
+        let bits = sort_bits(cam.width, cam.height);
+        // 32 is a whole number of digits: the output lands where the radix path's does.
+        let out = self.sort.record_bits(rec, &b.sort, count, 32, bits);
+        debug_assert_eq!(out, isect_out(cam.width, cam.height));
+        self.bin_ranges(rec, b, &pp, out);
+    }
+
+    /// Per-tile ranges of the sorted keys in `b.sort.keys[out]`.
+    fn bin_ranges(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        pp: &ProjectParams,
+        out: usize,
+    ) {
         rec.fill(b.ranges.all(), 0);
         rec.dispatch_indirect(
             &self.bin_ranges,
-            &pp,
+            pp,
             &[b.meta.all(), b.sort.keys[out].all(), b.ranges.all()],
             b.meta.slice(16, 12),
         );
