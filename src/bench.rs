@@ -585,17 +585,11 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
                     });
                 }
                 case.set_binning(Binning::for_device(&gpu.info));
-                let runs = BlendBwdVariant::ALL.map(Some);
-                for bwd in runs {
-                    if let Some(v) = bwd {
-                        case.set_blend_bwd_variant(v);
-                    }
-                    let (med, stages) = measure(args.reps, || case.run(&gpu, bwd.is_some()))?;
+                for v in BlendBwdVariant::ALL {
+                    case.set_blend_bwd_variant(v);
+                    let (med, stages) = measure(args.reps, || case.run(&gpu, true))?;
                     rows.push(BenchRow {
-                        kernel: format!(
-                            "raster {} {res}² ({isect} tile hits)",
-                            bwd.map_or("fwd".into(), |v| format!("fwd+bwd {}", v.name()))
-                        ),
+                        kernel: format!("raster fwd+bwd {} {res}² ({isect} tile hits)", v.name()),
                         n,
                         median_ms: med,
                         m_per_s: n as f64 / med / 1e3,

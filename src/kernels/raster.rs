@@ -753,7 +753,7 @@ impl Rasterizer {
         Self::check(b, cam, g);
         // Timed as its own zone (`bench step` compares the binning shapes).
         let outer = rec.set_zone("");
-        rec.set_zone(&format!("{outer} binning").trim_start().to_string());
+        rec.set_zone(format!("{outer} binning").trim_start());
         match self.binning {
             Binning::Radix => self.bin_radix(rec, b, cam, g),
             Binning::DepthFirst => self.bin_depth_first(rec, b, cam, g),
