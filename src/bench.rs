@@ -9,8 +9,8 @@
 use crate::error::{Error, Result};
 use crate::kernels::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use crate::kernels::raster::{
-    split_sh, BlendBwdVariant, BlendFwdVariant, Camera, DeviceShape, OutputGrads, RasterBuffers,
-    RasterSize, Rasterizer, RenderOpts, SplatInputs,
+    split_sh, Binning, BlendBwdVariant, BlendFwdVariant, Camera, DeviceShape, OutputGrads,
+    RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
 };
 use crate::kernels::scan::{Count, PrefixSum, ScanScratch};
 use crate::reference;
@@ -341,6 +341,11 @@ impl RasterCase {
         )
     }
 
+    /// The binning the next `run` records (the buffers serve both).
+    pub fn set_binning(&mut self, b: Binning) {
+        self.rast.set_binning(b);
+    }
+
     /// The blend-backward variant the next `run` records.
     pub fn set_blend_bwd_variant(&mut self, v: BlendBwdVariant) {
         self.rast.set_blend_bwd_variant(v);
@@ -563,17 +568,28 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
             for &n in &args.gaussians {
                 let mut case = RasterCase::new(&gpu, n, res)?;
                 let isect = case.intersections(&gpu)?;
-                let runs = std::iter::once(None).chain(BlendBwdVariant::ALL.map(Some));
-                for bwd in runs {
-                    if let Some(v) = bwd {
-                        case.set_blend_bwd_variant(v);
-                    }
-                    let (med, stages) = measure(args.reps, || case.run(&gpu, bwd.is_some()))?;
+                // The forward once per binning (zone `fwd binning`: the sort's share), then
+                // the device's binning with each backward.
+                for b in Binning::ALL {
+                    case.set_binning(b);
+                    let (med, stages) = measure(args.reps, || case.run(&gpu, false))?;
                     rows.push(BenchRow {
                         kernel: format!(
-                            "raster {} {res}² ({isect} tile hits)",
-                            bwd.map_or("fwd".into(), |v| format!("fwd+bwd {}", v.name()))
+                            "raster fwd {res}² ({isect} tile hits), {} binning",
+                            b.name()
                         ),
+                        n,
+                        median_ms: med,
+                        m_per_s: n as f64 / med / 1e3,
+                        stages: merge_stages(stages),
+                    });
+                }
+                case.set_binning(Binning::for_device(&gpu.info));
+                for v in BlendBwdVariant::ALL {
+                    case.set_blend_bwd_variant(v);
+                    let (med, stages) = measure(args.reps, || case.run(&gpu, true))?;
+                    rows.push(BenchRow {
+                        kernel: format!("raster fwd+bwd {} {res}² ({isect} tile hits)", v.name()),
                         n,
                         median_ms: med,
                         m_per_s: n as f64 / med / 1e3,

@@ -206,6 +206,15 @@ struct ProjectParams {
     uint pad2;
 };
 
+// src/kernels/binning.rs — depth-first binning: bin_depth_keys, bin_depth_counts,
+// bin_emit_depth.
+struct BinParams {
+    uint tiles_x;
+    uint tiles_y;
+    uint num_gaussians;
+    uint isect_capacity;
+};
+
 // src/kernels/raster.rs — per-tile α-blending, forward and backward.
 struct BlendParams {
     vec4 background;  // rgb; w unused

@@ -30,12 +30,18 @@ pub struct KernelSet {
     pub sort: &'static str,
     /// The tiles a splat is binned to (`DISPFLOW_SPLAT_EXTENT`).
     pub splat_extent: &'static str,
+    /// How splats are binned to tiles (`DISPFLOW_BINNING`).
+    pub binning: &'static str,
+    /// The motion normalisation's magnitude pass (`DISPFLOW_MOTION_NORM`).
+    pub motion_norm: &'static str,
 }
 
 impl KernelSet {
     /// Each choice with the variable that carries it.
-    fn vars(&self) -> [(&'static str, &'static str); 7] {
-        use crate::kernels::{loss, mlp_rows, nodes, radix_sort, raster, shape::DeviceShape};
+    fn vars(&self) -> [(&'static str, &'static str); 9] {
+        use crate::kernels::{
+            binning, loss, mlp_rows, motion, nodes, radix_sort, raster, shape::DeviceShape,
+        };
         [
             (mlp_rows::MlpKernels::ENV, self.mlp),
             (raster::BlendFwdVariant::ENV, self.blend_fwd),
@@ -44,6 +50,8 @@ impl KernelSet {
             (loss::BlurShape::ENV, self.loss_blur),
             (radix_sort::SortShape::ENV, self.sort),
             (raster::SplatExtent::ENV, self.splat_extent),
+            (binning::Binning::ENV, self.binning),
+            (motion::NormMagShape::ENV, self.motion_norm),
         ]
     }
 
@@ -62,9 +70,10 @@ impl KernelSet {
     }
 }
 
-/// The choice before issue 14, the CPU set after it (3σ tile squares), and today's CPU
-/// default (the same kernels binning each splat to its opacity-aware box, issue 60).
-pub const KERNEL_SETS: [KernelSet; 3] = [
+/// The choice before issue 14, the CPU set after it (3σ tile squares), the same kernels
+/// binning each splat to its opacity-aware box (issue 60), and today's CPU default (the same
+/// boxes binned depth first and the motion magnitude in runs, issue 60).
+pub const KERNEL_SETS: [KernelSet; 4] = [
     KernelSet {
         name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
         mlp: "tiled",
@@ -74,6 +83,8 @@ pub const KERNEL_SETS: [KernelSet; 3] = [
         loss_blur: "pixel",
         sort: "block",
         splat_extent: "radius",
+        binning: "radix",
+        motion_norm: "tree",
     },
     KernelSet {
         name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather + rows \
@@ -85,6 +96,8 @@ pub const KERNEL_SETS: [KernelSet; 3] = [
         loss_blur: "rows",
         sort: "serial",
         splat_extent: "radius",
+        binning: "radix",
+        motion_norm: "tree",
     },
     KernelSet {
         name: "the same CPU kernels, opacity-aware tile boxes",
@@ -95,6 +108,21 @@ pub const KERNEL_SETS: [KernelSet; 3] = [
         loss_blur: "rows",
         sort: "serial",
         splat_extent: "opacity-box",
+        binning: "radix",
+        motion_norm: "tree",
+    },
+    KernelSet {
+        name: "the same CPU kernels, opacity-aware tile boxes, depth-first binning, motion \
+               magnitude in runs",
+        mlp: "rows",
+        blend_fwd: "tile-regs",
+        blend_bwd: "tile-accum",
+        nodes_gather: "serial",
+        loss_blur: "rows",
+        sort: "serial",
+        splat_extent: "opacity-box",
+        binning: "depth-first",
+        motion_norm: "runs",
     },
 ];
 
@@ -245,7 +273,7 @@ pub fn make_quarter_transient(tr: &mut Trainer) -> Result<()> {
 /// the splat extent: GPUs bin to the opacity-aware box too).
 pub fn default_set(gpu: &Gpu) -> usize {
     if gpu.info.kind == "CPU" {
-        2
+        3
     } else {
         0
     }
@@ -359,6 +387,21 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
             );
         }
     }
+    let (radix, depth_first) = (KERNEL_SETS[2].name, KERNEL_SETS[3].name);
+    for r in rows.iter().filter(|r| r.kernels == depth_first) {
+        if let Some(b) = find(r, radix) {
+            println!(
+                "{} {}: binned depth first the CPU step costs {:.2}× the radix binning ({:.2} \
+                 vs {:.2} ms); per zone, radix → depth first: {}",
+                r.scene,
+                r.method,
+                r.median_ms / b.median_ms,
+                r.median_ms,
+                b.median_ms,
+                zone_pairs(b, r)
+            );
+        }
+    }
     for r in rows.iter().filter(|r| r.kernels == TRANSIENT_ROW) {
         // The same kernels without transients.
         if let Some(b) = find(r, own) {
@@ -388,6 +431,16 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
         }
     }
     Ok(out)
+}
+
+/// The rasteriser's zones of `a` and `b` side by side: "zone a → b ms".
+fn zone_pairs(a: &StepRow, b: &StepRow) -> String {
+    let ms = |r: &StepRow, z: &str| r.zones.iter().find(|e| e.0 == z).map_or(0.0, |e| e.1);
+    (a.zones.iter())
+        .filter(|(z, _)| z.contains("raster") || z.contains("intermediate"))
+        .map(|(z, _)| format!("{z} {:.2} → {:.2}", ms(a, z), ms(b, z)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// GFLOP/s of the register-only FMA probe (median of `reps`).

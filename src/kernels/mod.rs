@@ -2,6 +2,7 @@
 //! `glsl/include/params.glsl`, pipelines built once, `record()` taking explicit buffers.
 
 pub mod adam;
+pub mod binning;
 pub mod check;
 pub mod deform;
 pub mod densify;
@@ -146,6 +147,13 @@ pub fn param_layouts() -> Vec<ParamLayout> {
         ),
         layout!(scan::ScanParams, capacity, level, num_levels, pad),
         layout!(radix_sort::SortParams, capacity, shift, digit_mask, pad),
+        layout!(
+            binning::BinParams,
+            tiles_x,
+            tiles_y,
+            num_gaussians,
+            isect_capacity
+        ),
         layout!(
             raster::ProjectParams,
             rot0,

@@ -194,6 +194,25 @@ impl RadixSort {
         count: Count<'_>,
         bits: u32,
     ) -> usize {
+        self.record_bits(rec, b, count, 0, bits)
+    }
+
+    /// As [`record`](Self::record) over the key bits `[lo, bits)` only (`lo` a multiple of
+    /// `RADIX_BITS`): for pairs already in order by the bits below `lo` (the depth-first
+    /// binning sorts only the tile bits of keys emitted in depth order). `passes(bits - lo)`
+    /// odd → 1.
+    pub fn record_bits(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &SortBuffers,
+        count: Count<'_>,
+        lo: u32,
+        bits: u32,
+    ) -> usize {
+        assert!(
+            lo % RADIX_BITS == 0 && lo <= bits,
+            "sort of bits [{lo}, {bits})"
+        );
         assert!(
             bits <= b.width.bits(),
             "sort of {bits} bits with {:?} keys",
@@ -225,9 +244,9 @@ impl RadixSort {
         rec.dispatch(&self.setup, &pc(0), &[count, b.meta.all()], [1, 1, 1]);
         let args = b.meta.slice(4, 12);
         let hist_len = b.meta.slice(META_HIST_LEN, 4);
-        for p in 0..passes(bits) {
+        for p in 0..passes(bits - lo) {
             let (src, dst) = ((p % 2) as usize, ((p + 1) % 2) as usize);
-            let pc = pc(p * RADIX_BITS);
+            let pc = pc(lo + p * RADIX_BITS);
             rec.dispatch_indirect(
                 &self.hist[w],
                 &pc,
@@ -255,6 +274,6 @@ impl RadixSort {
                 args,
             );
         }
-        (passes(bits) % 2) as usize
+        (passes(bits - lo) % 2) as usize
     }
 }

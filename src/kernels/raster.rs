@@ -2,9 +2,10 @@
 //! Over 600 lines: forward, backward and the overflow re-run share one buffer set and its
 //! capacity contract; split, each part would restate which pass fills which buffer.
 //!
-//! Forward: `project` → scan of tiles touched → `bin_total` → `bin_emit` ((tile | depth) keys)
-//! → radix sort (only `32 + tile_bits` bits) → `bin_ranges` → `blend_fwd` (one of
-//! `BlendFwdVariant`).
+//! Forward: `project` → binning, one of `Binning` (radix: scan of tiles touched → `bin_total`
+//! → `bin_emit` ((tile | depth) keys) → radix sort (only `32 + tile_bits` bits); depth first:
+//! depth sort of the Gaussians → `bin_depth_counts` → scan → `bin_total` → `bin_emit_depth` →
+//! radix sort of the tile bits; both → `bin_ranges`) → `blend_fwd` (one of `BlendFwdVariant`).
 //! Backward: `blend_bwd` (accumulates per-splat 2D gradients; one of `BlendBwdVariant`) →
 //! `project_bwd`.
 //! Nothing is read back inside a pass; the intersection count drives the sort and the range
@@ -17,6 +18,8 @@
 
 use bytemuck::{Pod, Zeroable};
 
+pub use super::binning::Binning;
+use super::binning::{BinParams, DepthFirst, DepthFirstBuffers};
 use super::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use super::scan::{Count, PrefixSum, ScanScratch};
 pub use super::shape::DeviceShape;
@@ -233,6 +236,7 @@ pub struct RasterBuffers {
     meta: Buffer,
     scan: ScanScratch,
     sort: SortBuffers,
+    depth_first: DepthFirstBuffers,
     ranges: Buffer,
     /// [H·W] vec4: rgb (background included) and alpha = 1 − T.
     pub out_rgba: Buffer,
@@ -288,6 +292,21 @@ impl RasterBuffers {
         gpu.read(self.rects.elems::<[u32; 4]>(0, n as u64))
     }
 
+    /// Per tile `[start, end)` in the intersection list of the last forward ((0, 0) for a tile
+    /// without entries; tests).
+    pub fn tile_ranges(&self, gpu: &Gpu) -> Result<Vec<[u32; 2]>> {
+        let (tx, ty) = (self.width.div_ceil(TILE), self.height.div_ceil(TILE));
+        gpu.read(self.ranges.elems::<[u32; 2]>(0, tx as u64 * ty as u64))
+    }
+
+    /// The Gaussian id of every tile intersection of the last forward, tile by tile, front to
+    /// back (what the blends walk; tests). Read after its submit; at most the capacity.
+    pub fn intersection_ids(&self, gpu: &Gpu) -> Result<Vec<u32>> {
+        let m = self.intersections(gpu)?.min(self.isect_capacity);
+        let out = isect_out(self.width, self.height);
+        gpu.read(self.sort.vals[out].elems::<u32>(0, m as u64))
+    }
+
     /// The u32 that is 1 when the last forward pass overflowed the intersection capacity,
     /// followed by the needed count: bind it as an optimiser's skip flag, or copy it out.
     pub fn overflow_flag(&self) -> BufSlice<'_> {
@@ -295,10 +314,16 @@ impl RasterBuffers {
     }
 }
 
-fn sort_bits(cam: &Camera) -> u32 {
-    let (tx, ty) = cam.tiles();
-    let tiles = (tx * ty).max(2);
+fn sort_bits(width: u32, height: u32) -> u32 {
+    let tiles = (width.div_ceil(TILE) * height.div_ceil(TILE)).max(2);
     32 + (32 - (tiles - 1).leading_zeros())
+}
+
+/// Which of `sort.keys`/`sort.vals` holds the sorted intersections the blends read: both
+/// binnings end in the same buffer (the depth-first tile sort runs a whole number of digit
+/// passes fewer), so the backward needs no binning choice.
+fn isect_out(width: u32, height: u32) -> usize {
+    (passes(sort_bits(width, height)) % 2) as usize
 }
 
 /// How `blend_bwd` folds per-pixel gradient terms into per-splat sums. All variants compute
@@ -421,6 +446,8 @@ pub struct Rasterizer {
     blend_bwd_variant: BlendBwdVariant,
     project_bwd: ComputePipeline,
     splat_extent: SplatExtent,
+    binning: Binning,
+    depth_first: DepthFirst,
     scan: PrefixSum,
     sort: RadixSort,
 }
@@ -486,6 +513,8 @@ impl Rasterizer {
             blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
             project_bwd: gpu.pipeline(&r::PROJECT_BWD)?,
             splat_extent: SplatExtent::for_device(&gpu.info),
+            binning: Binning::for_device(&gpu.info),
+            depth_first: DepthFirst::new(gpu)?,
             scan: PrefixSum::new(gpu)?,
             sort: RadixSort::new(gpu)?,
         })
@@ -519,6 +548,16 @@ impl Rasterizer {
     /// Chooses the splat extent (tests and benches compare them on one device).
     pub fn set_splat_extent(&mut self, e: SplatExtent) {
         self.splat_extent = e;
+    }
+
+    /// How `forward` bins splats to tiles.
+    pub fn binning(&self) -> Binning {
+        self.binning
+    }
+
+    /// Chooses the binning (tests and benches compare them on one device; buffers serve both).
+    pub fn set_binning(&mut self, b: Binning) {
+        self.binning = b;
     }
 
     /// Buffers for `s.max_gaussians` splats on a `s.width`×`s.height` image (grown by
@@ -562,6 +601,7 @@ impl Rasterizer {
                 isect_capacity.max(1),
                 KeyWidth::U64,
             )?,
+            depth_first: self.depth_first.buffers(gpu, &self.sort, max_gaussians)?,
             ranges: gpu.buffer("raster tile ranges", tiles * 8)?,
             out_rgba: gpu.buffer("raster out rgba", px * 16)?,
             out_depth: gpu.buffer("raster out depth", px * f)?,
@@ -711,8 +751,47 @@ impl Rasterizer {
         o: &RenderOpts,
     ) {
         Self::check(b, cam, g);
+        // Timed as its own zone (`bench step` compares the binning shapes).
+        let outer = rec.set_zone("");
+        rec.set_zone(format!("{outer} binning").trim_start());
+        match self.binning {
+            Binning::Radix => self.bin_radix(rec, b, cam, g),
+            Binning::DepthFirst => self.bin_depth_first(rec, b, cam, g),
+        }
+        rec.set_zone(&outer);
+        let out = isect_out(cam.width, cam.height);
+        let bp = Self::blend_params(cam, g, o);
+        let (tx, ty) = cam.tiles();
+        let mut binds = vec![
+            b.ranges.all(),
+            b.sort.vals[out].all(),
+            b.splats.all(),
+            b.out_rgba.all(),
+            b.out_depth.all(),
+            b.final_t.all(),
+            b.n_contrib.all(),
+        ];
+        if let Some((f, _)) = g.features {
+            binds.extend([f, b.out_features.all()]);
+        }
+        rec.dispatch(
+            &self.blend_fwd[self.blend_fwd_variant as usize][variant(g.feature_dims()).unwrap()],
+            &bp,
+            &binds,
+            [tx.max(1), ty.max(1), 1],
+        );
+    }
+
+    /// The radix binning: (tile | depth) keys per intersection, sorted, then the ranges.
+    fn bin_radix(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+    ) {
         let pp = self.project_params(b, cam, g);
-        let bits = sort_bits(cam);
+        let bits = sort_bits(cam.width, cam.height);
         self.scan.record(
             rec,
             &b.scan,
@@ -742,32 +821,70 @@ impl Rasterizer {
             .sort
             .record(rec, &b.sort, Count::Gpu(b.meta.slice(0, 4)), bits);
         debug_assert_eq!(out, (passes(bits) % 2) as usize);
+        self.bin_ranges(rec, b, &pp, out);
+    }
+
+    /// The depth-first binning (`binning.rs`): the Gaussians sorted by depth, their keys
+    /// emitted in that order, then sorted by the tile bits only; the same keys, ids and
+    /// ranges as `bin_radix`.
+    fn bin_depth_first(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        cam: &Camera,
+        g: &SplatInputs<'_>,
+    ) {
+        let pp = self.project_params(b, cam, g);
+        let (tiles_x, tiles_y) = cam.tiles();
+        let p = BinParams {
+            tiles_x,
+            tiles_y,
+            num_gaussians: g.n,
+            isect_capacity: b.isect_capacity,
+        };
+        let (k, d) = (&self.depth_first, &b.depth_first);
+        let keys = [b.splats.all(), d.sort.keys[0].all(), d.sort.vals[0].all()];
+        rec.dispatch_rows(&k.keys, &p, &keys, g.n);
+        let order = d.sort.vals[self.sort.record(rec, &d.sort, Count::Host(g.n), 32)].all();
+        let counts = [order, b.counts.all(), d.counts.all()];
+        rec.dispatch_rows(&k.counts, &p, &counts, g.n);
+        // `offsets` as the radix path uses it, but in depth order.
+        let (counts, offsets) = (d.counts.all(), b.offsets.all());
+        self.scan
+            .record(rec, &b.scan, counts, offsets, Count::Host(g.n));
+        let total = [offsets, counts, b.meta.all()];
+        rec.dispatch(&self.bin_total, &pp, &total, [1, 1, 1]);
+        let emit = [
+            b.splats.all(),
+            b.rects.all(),
+            order,
+            offsets,
+            b.sort.keys[0].all(),
+            b.sort.vals[0].all(),
+        ];
+        rec.dispatch_rows(&k.emit, &p, &emit, g.n);
+        let count = Count::Gpu(b.meta.slice(0, 4));
+        let bits = sort_bits(cam.width, cam.height);
+        // 32 is a whole number of digits: the output lands where the radix path's does.
+        let out = self.sort.record_bits(rec, &b.sort, count, 32, bits);
+        debug_assert_eq!(out, isect_out(cam.width, cam.height));
+        self.bin_ranges(rec, b, &pp, out);
+    }
+
+    /// Per-tile ranges of the sorted keys in `b.sort.keys[out]`.
+    fn bin_ranges(
+        &self,
+        rec: &mut Recorder<'_>,
+        b: &RasterBuffers,
+        pp: &ProjectParams,
+        out: usize,
+    ) {
         rec.fill(b.ranges.all(), 0);
         rec.dispatch_indirect(
             &self.bin_ranges,
-            &pp,
+            pp,
             &[b.meta.all(), b.sort.keys[out].all(), b.ranges.all()],
             b.meta.slice(16, 12),
-        );
-        let bp = Self::blend_params(cam, g, o);
-        let (tx, ty) = cam.tiles();
-        let mut binds = vec![
-            b.ranges.all(),
-            b.sort.vals[out].all(),
-            b.splats.all(),
-            b.out_rgba.all(),
-            b.out_depth.all(),
-            b.final_t.all(),
-            b.n_contrib.all(),
-        ];
-        if let Some((f, _)) = g.features {
-            binds.extend([f, b.out_features.all()]);
-        }
-        rec.dispatch(
-            &self.blend_fwd[self.blend_fwd_variant as usize][variant(g.feature_dims()).unwrap()],
-            &bp,
-            &binds,
-            [tx.max(1), ty.max(1), 1],
         );
     }
 
@@ -802,7 +919,7 @@ impl Rasterizer {
             g.features.is_some(),
             "feature gradients given iff features are"
         );
-        let out = (passes(sort_bits(cam)) % 2) as usize;
+        let out = isect_out(cam.width, cam.height);
         let bp = Self::blend_params(cam, g, o);
         let (tx, ty) = cam.tiles();
         rec.fill(b.grad2d.all(), 0);

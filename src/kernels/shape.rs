@@ -66,13 +66,14 @@ pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'s
     ) -> (&'static str, &'static str, &'static str) {
         (what, S::for_device(info).name(), S::ENV)
     }
-    use super::{loss::BlurShape, mlp_rows::MlpKernels, motion::NormMagShape, nodes::GatherShape};
-    use super::{radix_sort, raster};
+    use super::{binning::Binning, loss::BlurShape, mlp_rows::MlpKernels, motion::NormMagShape};
+    use super::{nodes::GatherShape, radix_sort, raster};
     vec![
         row::<MlpKernels>("MLP", info),
         row::<raster::BlendFwdVariant>("blend forward", info),
         row::<raster::BlendBwdVariant>("blend backward", info),
         row::<raster::SplatExtent>("splat extent", info),
+        row::<Binning>("tile binning", info),
         row::<GatherShape>("node gather", info),
         row::<BlurShape>("loss blur", info),
         row::<NormMagShape>("motion magnitude", info),
