@@ -518,6 +518,15 @@ fn auto_spawns_once_a_residual_has_held_through_the_gate() {
         third.spawned > 0 && *held as usize == third.spawned,
         "{third}"
     );
+    // Open, the rules still judge every round: where the model draws every wrong pixel
+    // nothing more spawns (`on` would). Round 150 looks at new frames, 180 at them again.
+    tr.cfg.transient.uncovered = 1.0;
+    train_common::run_to(&mut tr, 180);
+    let (it, s) = tr.last_spawn.clone().unwrap();
+    assert!(
+        it == 180 && s.spawned == 0 && s.covered > 0 && s.covered == s.looked_at,
+        "an open gate spawned from frames it draws: {s}"
+    );
     // Where the model draws the wrong pixels (it covers the whole tiny scene), a frame held
     // through the gate is left to densification: not all of its wrong pixels are bare.
     c.transient.uncovered = 1.0;

@@ -380,14 +380,15 @@ pub struct TransientConfig {
     /// needs one. More is a stricter test of "the canonical population cannot draw it".
     pub gate: u32,
     /// Under `auto`, the share of a held frame's wrong pixels where the model draws nothing
-    /// (coverage 1 − T under ½) it needs to open the gate: an object missing from the model,
+    /// (coverage 1 − T under ½) it needs to spawn (to open the gate, and at every round after):
+    /// an object missing from the model,
     /// where densification has no Gaussian to clone or split, and not one drawn wrong, which
     /// the canonical population can still fix. Measured before any spawn (docs/usage.md):
     /// 1.0 on mujoco-scene5 (white), at most 0.32 on D-NeRF bouncingballs, 0.13 on scene7.
     pub uncovered: f32,
     /// Under `auto`, the localized residual (mean absolute RGB error summed over the wrong
-    /// pixels) per pixel of the frame that a held frame needs to open the gate: the missing
-    /// region must matter. 0.01 by default: at the gate's opening on mujoco-scene5 the frames
+    /// pixels) per pixel of the frame that a held frame needs to spawn (the opening and every
+    /// round after): the missing region must matter. 0.01 by default: at the gate's opening on mujoco-scene5 the frames
     /// read 0.019–0.031, on D-NeRF hellwarrior (a dark figure on black, whose thin parts are
     /// bare) 0.002–0.004, where opening cost 0.30 dB.
     pub min_residual: f32,
