@@ -182,23 +182,7 @@ fn binnings_give_the_same_lists_and_images() {
 #[test]
 fn binnings_give_the_same_gradients() {
     let gpu = testing::gpu();
-    if gpu.info.name.contains("llvmpipe") && std::env::var("LP_NUM_THREADS").as_deref() != Ok("1") {
-        drop(gpu);
-        let exe = std::env::current_exe().expect("the test binary's path");
-        let out = std::process::Command::new(exe)
-            .args([TEST_GRADS, "--exact", "--nocapture"])
-            .env("LP_NUM_THREADS", "1")
-            .output()
-            .expect("re-run the test single-threaded");
-        let text = format!(
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert!(
-            out.status.success() && text.contains("1 passed"),
-            "single-threaded re-run:\n{text}"
-        );
+    if rerun_single_threaded(&gpu, TEST_GRADS) {
         return;
     }
     drop(gpu);

@@ -69,23 +69,7 @@ fn render_with(
 #[test]
 fn boxes_change_no_pixel_and_no_gradient() {
     let gpu = testing::gpu();
-    if gpu.info.name.contains("llvmpipe") && std::env::var("LP_NUM_THREADS").as_deref() != Ok("1") {
-        drop(gpu);
-        let exe = std::env::current_exe().expect("the test binary's path");
-        let out = std::process::Command::new(exe)
-            .args([TEST_BITS, "--exact", "--nocapture"])
-            .env("LP_NUM_THREADS", "1")
-            .output()
-            .expect("re-run the test single-threaded");
-        let text = format!(
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert!(
-            out.status.success() && text.contains("1 passed"),
-            "single-threaded re-run:\n{text}"
-        );
+    if rerun_single_threaded(&gpu, TEST_BITS) {
         return;
     }
     let mut rast = Rasterizer::new(&gpu).unwrap();

@@ -368,3 +368,29 @@ pub fn twin_blend_bwd(
         &u.features,
     )
 }
+
+/// On lavapipe with more than one thread (float-atomic sums in any order), re-runs the test
+/// `name` of this binary with `LP_NUM_THREADS=1` and checks it passed; true when it did so
+/// (the caller returns), false where the run is already bit-reproducible.
+pub fn rerun_single_threaded(gpu: &TestGpu, name: &str) -> bool {
+    if !gpu.info.name.contains("llvmpipe") || std::env::var("LP_NUM_THREADS").as_deref() == Ok("1")
+    {
+        return false;
+    }
+    let exe = std::env::current_exe().expect("the test binary's path");
+    let out = std::process::Command::new(exe)
+        .args([name, "--exact", "--nocapture"])
+        .env("LP_NUM_THREADS", "1")
+        .output()
+        .expect("re-run the test single-threaded");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        out.status.success() && text.contains("1 passed"),
+        "single-threaded re-run:\n{text}"
+    );
+    true
+}
