@@ -35,6 +35,11 @@ pub enum Error {
     },
     #[error("invalid argument: {0}")]
     Invalid(String),
+    /// A rasteriser blend could not walk a tile's whole splat list (the device ends long
+    /// shader loops: llvmpipe after 65 535 iterations of one invocation). Growing buffers
+    /// cannot help; the render is wrong and nothing learns from it.
+    #[error("{what}: a 16×16 tile holds more splats than this Vulkan device lets one shader invocation walk (lavapipe/llvmpipe ends every loop after 65 535 iterations, silently), so the render was cut and is discarded; use fewer or smaller Gaussians per tile (a lower --budget, a larger image) or a GPU")]
+    TileWalkCut { what: String },
     #[error("{count} Vulkan validation error(s) during {what} (a bug in dispflow-vk; please report it):\n{messages}")]
     Validation {
         what: String,

@@ -748,7 +748,11 @@ mod gpu_step {
         let mut rec = Recorder::new(gpu).unwrap();
         record_step(&mut rec, &plan, &model, &mut passes, &frames, 0.2);
         rec.finish().unwrap();
-        assert!(!passes.watch.read(0).overflowed && !passes.watch.read(1).overflowed);
+        let (o0, o1) = (
+            passes.watch.read(0, "render").unwrap(),
+            passes.watch.read(1, "intermediate").unwrap(),
+        );
+        assert!(!o0.overflowed && !o1.overflowed);
         let g = &model.gaussians;
         let read = |s: Section| -> Vec<f64> {
             let v: Vec<f32> = gpu.read(g.grad(s)).unwrap();

@@ -6,6 +6,12 @@
 // α below this is skipped; transmittance below T_STOP ends a pixel (3DGS/gsplat rules).
 #define ALPHA_MIN (1.0 / 255.0)
 #define T_STOP 1e-4
+// Bits of the raster overflow word (meta[64], bin_total.comp): bit 0, the tile intersections
+// overflowed their capacity (the host grows and re-runs); bit 1, a blend's walk of a tile was
+// cut by the device's loop budget while a pixel still took splats (the host reports an error:
+// growing cannot help). Mirrored in src/kernels/raster.rs (`OVERFLOW_*`).
+#define OVERFLOW_CAPACITY 1u
+#define OVERFLOW_WALK_CUT 2u
 #define DILATION 0.3
 
 // Per-Gaussian splat record written by `project`, read by blend (3 × vec4):

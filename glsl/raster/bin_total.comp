@@ -2,11 +2,12 @@
 // Total tile intersections = last exclusive offset + last count. meta[0] = total clamped to the
 // capacity (the sort's count), meta[1] = unclamped total (the host compares it with the capacity
 // after the step and re-runs with grown buffers on overflow), meta[4..7] = the indirect dispatch
-// size of bin_ranges (2D beyond 32768 workgroups), meta[64] = 1 on overflow (at byte 256, so it
+// size of bin_ranges (2D beyond 32768 workgroups), meta[64] = OVERFLOW_CAPACITY on overflow (at byte 256, so it
 // can be bound alone as the optimiser's skip flag), meta[65] = total again (read with the flag).
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 #include "params.glsl"
+#include "raster.glsl"
 
 layout(local_size_x = 1) in;
 
@@ -26,6 +27,6 @@ void main() {
     meta[4] = gx;
     meta[5] = gx == 0u ? 0u : (groups + gx - 1u) / gx;
     meta[6] = 1u;
-    meta[64] = total > pc.isect_capacity ? 1u : 0u;
+    meta[64] = total > pc.isect_capacity ? OVERFLOW_CAPACITY : 0u;
     meta[65] = total;
 }

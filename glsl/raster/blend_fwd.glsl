@@ -80,6 +80,9 @@ void main() {
             last = seen;
         }
     }
+    // A pixel not saturated has seen every splat of its tile, unless the device cut the loop
+    // (llvmpipe ends an invocation's loops after 65 535 iterations in all, silently).
+    if (!done && seen < range.y - range.x) atomicOr(overflow_word, OVERFLOW_WALK_CUT);
     if (!inside) return;
     uint p = pix.y * pc.width + pix.x;
     out_rgba[p] = vec4(C + T * pc.background.rgb, 1.0 - T);

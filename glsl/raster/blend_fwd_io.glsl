@@ -12,3 +12,5 @@ layout(std430, binding = 6) writeonly buffer NContrib { uint n_contrib[]; };
 layout(std430, binding = 7) readonly buffer Feat { float feat[]; };         // [N,FEAT]
 layout(std430, binding = 8) writeonly buffer OutFeat { float out_feat[]; }; // [H·W,FEAT]
 #endif
+// The overflow word (meta[64] of bin_total, bound alone); a blend ORs OVERFLOW_WALK_CUT into it.
+layout(std430, binding = 9) buffer Overflow { uint overflow_word; };

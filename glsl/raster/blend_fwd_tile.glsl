@@ -55,7 +55,8 @@ void main() {
 #endif
     }
 
-    for (uint j = range.x; j < range.y; ++j) {
+    uint j = range.x;
+    for (; j < range.y; ++j) {
         if (subgroupAll(live == 0u)) break;
         uint gid = ids[j]; // uniform: broadcast loads below
         vec4 a = splats[SPLAT_STRIDE * gid];
@@ -94,6 +95,11 @@ void main() {
             last[i] = seen;
         }
     }
+
+    // The walk ends at the list's end or once every pixel is saturated. Ending elsewhere with a
+    // live pixel means the device cut the loop (llvmpipe ends an invocation's loops after
+    // 65 535 iterations in all, silently): the image is wrong, so say so.
+    if (j < range.y && live != 0u) atomicOr(overflow_word, OVERFLOW_WALK_CUT);
 
     for (int i = 0; i < PX; ++i) {
         uint q = t + WG * uint(i);

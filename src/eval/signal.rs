@@ -442,7 +442,10 @@ impl Probe {
             self.watch.record(&mut rec, 1, &self.r2);
             self.watch.publish(&mut rec);
             rec.finish()?;
-            let (o1, o2) = (self.watch.read(0), self.watch.read(1));
+            let (o1, o2) = (
+                self.watch.read(0, "signal render at t1")?,
+                self.watch.read(1, "signal render at t2")?,
+            );
             if !(o1.overflowed || o2.overflowed) {
                 return Ok(());
             }

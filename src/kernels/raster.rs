@@ -307,10 +307,47 @@ impl RasterBuffers {
         gpu.read(self.sort.vals[out].elems::<u32>(0, m as u64))
     }
 
-    /// The u32 that is 1 when the last forward pass overflowed the intersection capacity,
-    /// followed by the needed count: bind it as an optimiser's skip flag, or copy it out.
+    /// The overflow word of the last forward (bits `OVERFLOW_*`: non-zero when its render must
+    /// not be used), followed by the intersections needed: bind it as an optimiser's skip
+    /// flag, or copy it out.
     pub fn overflow_flag(&self) -> BufSlice<'_> {
         self.meta.slice(256, 8)
+    }
+
+    /// The overflow pair of the last forward, read after its submit.
+    pub fn overflow(&self, gpu: &Gpu) -> Result<Overflow> {
+        let w = gpu.read::<u32>(self.meta.elems::<u32>(64, 2))?;
+        Overflow::from_words(w[0], w[1], "render")
+    }
+}
+
+/// Bits of the overflow word (`meta[64]`; glsl/include/raster.glsl): the tile intersections
+/// overflowed their capacity (grow and re-run), and a blend's walk of a tile was cut by the
+/// device's loop budget (an error: nothing to grow).
+pub const OVERFLOW_CAPACITY: u32 = 1;
+pub const OVERFLOW_WALK_CUT: u32 = 2;
+
+/// One render's overflow after a submit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Overflow {
+    /// The intersections overflowed: grow to `needed` and re-run.
+    pub overflowed: bool,
+    pub needed: u32,
+}
+
+impl Overflow {
+    /// From the overflow word and the needed count; a cut walk is [`Error::TileWalkCut`]
+    /// naming `what` rendered.
+    pub fn from_words(word: u32, needed: u32, what: &str) -> Result<Overflow> {
+        if word & OVERFLOW_WALK_CUT != 0 {
+            return Err(Error::TileWalkCut {
+                what: what.to_string(),
+            });
+        }
+        Ok(Overflow {
+            overflowed: word & OVERFLOW_CAPACITY != 0,
+            needed,
+        })
     }
 }
 
@@ -774,6 +811,7 @@ impl Rasterizer {
         if let Some((f, _)) = g.features {
             binds.extend([f, b.out_features.all()]);
         }
+        binds.push(b.meta.slice(256, 4));
         rec.dispatch(
             &self.blend_fwd[self.blend_fwd_variant as usize][variant(g.feature_dims()).unwrap()],
             &bp,
@@ -1017,11 +1055,11 @@ impl Rasterizer {
             let mut rec = Recorder::new(gpu)?;
             self.forward(&mut rec, b, cam, g, o);
             rec.finish()?;
-            let need = b.intersections(gpu)?;
-            if need <= b.isect_capacity {
+            let o = b.overflow(gpu)?;
+            if !o.overflowed {
                 return Ok(());
             }
-            self.grow(gpu, b, need)?;
+            self.grow(gpu, b, o.needed)?;
         }
     }
 }

@@ -277,14 +277,14 @@ impl<'g> Trainer<'g> {
             // truncated render and the result does not depend on the buffers' history.
             let s = self.passes.as_mut().expect("built");
             let mut again = false;
-            let o = s.watch.read(0);
+            let o = s.watch.read(0, "training render")?;
             if o.overflowed {
                 s.render.grow(self.gpu, o.needed)?;
                 again = true;
             }
             let m = s.motion.as_mut().filter(|_| p.motion.is_some());
             if let Some(m) = m.filter(|m| m.rendered_intermediate().is_some()) {
-                let o = s.watch.read(1);
+                let o = s.watch.read(1, "intermediate render")?;
                 if o.overflowed {
                     m.grow_intermediate(self.gpu, o.needed)?;
                     again = true;

@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::kernels::deform::Drawn;
 use crate::kernels::loss::{LossBuffers, LossValues, PhotometricLoss};
 use crate::kernels::raster::{
-    Camera, OutputGrads, RasterBuffers, Rasterizer, RenderOpts, SplatInputs,
+    Camera, OutputGrads, Overflow, RasterBuffers, Rasterizer, RenderOpts, SplatInputs,
 };
 use crate::model::gaussians::Section;
 use crate::model::state::GaussianState;
@@ -162,13 +162,6 @@ pub struct OverflowWatch {
     slots: u64,
 }
 
-/// One render's overflow after a submit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Overflow {
-    pub overflowed: bool,
-    pub needed: u32,
-}
-
 impl OverflowWatch {
     pub fn new(gpu: &Gpu, name: &str, slots: u64) -> Result<Self> {
         Ok(OverflowWatch {
@@ -195,13 +188,11 @@ impl OverflowWatch {
         rec.copy(self.flags.all(), self.host.all());
     }
 
-    /// Slot `k` as of the last finished submit that recorded and published it.
-    pub fn read(&self, k: u64) -> Overflow {
+    /// Slot `k` as of the last finished submit that recorded and published it; an error when
+    /// its render's tile walk was cut ([`Error::TileWalkCut`], naming `what`).
+    pub fn read(&self, k: u64, what: &str) -> Result<Overflow> {
         let w: Vec<u32> = self.host.read_mapped();
-        Overflow {
-            overflowed: w[2 * k as usize] != 0,
-            needed: w[2 * k as usize + 1],
-        }
+        Overflow::from_words(w[2 * k as usize], w[2 * k as usize + 1], what)
     }
 }
 

@@ -332,7 +332,7 @@ impl Evaluator {
             self.watch.record(&mut rec, 0, &self.render);
             self.watch.publish(&mut rec);
             rec.finish()?;
-            let o = self.watch.read(0);
+            let o = self.watch.read(0, "displacement-flow render")?;
             if o.overflowed {
                 self.render.grow(gpu, o.needed)?;
                 continue;
@@ -429,9 +429,14 @@ impl Evaluator {
             self.record(&mut rec, model, view, v);
             self.watch.publish(&mut rec);
             rec.finish()?;
-            let (full, froz) = (self.watch.read(0), self.watch.read(1));
-            if full.overflowed || (frozen && froz.overflowed) {
-                let need = full.needed.max(if frozen { froz.needed } else { 0 });
+            let full = self.watch.read(0, "evaluation render")?;
+            let froz = if frozen {
+                Some(self.watch.read(1, "evaluation render (frozen)")?)
+            } else {
+                None
+            };
+            if full.overflowed || froz.is_some_and(|o| o.overflowed) {
+                let need = full.needed.max(froz.map_or(0, |o| o.needed));
                 self.render.grow(gpu, need)?;
                 continue;
             }
