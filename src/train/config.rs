@@ -392,6 +392,15 @@ pub struct TransientConfig {
     /// read 0.019–0.031, on D-NeRF hellwarrior (a dark figure on black, whose thin parts are
     /// bare) 0.002–0.004, where opening cost 0.30 dB.
     pub min_residual: f32,
+    /// Under `auto`, whether a still depth hypothesis (a wrong pixel no track explains,
+    /// spawned at `depths` depths) must be confirmed by a temporal neighbour (`track` > 0)
+    /// that sees it: wrong there, with the pixel's ground-truth patch, as a track's evidence
+    /// (`Tracker::confirms_still`; one no neighbour sees is kept). A hypothesis at the wrong
+    /// depth is a floater in the other views (D-NeRF trex, seed 0: +0.68 dB with the check);
+    /// but a still hypothesis on a moving figure is rejected too (standup, seed 2: −1.94 dB).
+    /// Off by default: over 10 runs it is a wash (docs/measurements.md, "Confirming depth
+    /// hypotheses").
+    pub confirm: bool,
     /// The share of the Gaussian budget kept for transients: the canonical population starts
     /// and densifies within the rest (so a scene whose initial points fill the budget still
     /// has room to spawn). A reservation, not a ceiling: transients spawn, clone and split
@@ -435,6 +444,7 @@ impl Default for TransientConfig {
             pixels: 64,
             depths: 4,
             track: 2,
+            confirm: false,
             min_error: 0.12,
             init_opacity: 0.7,
             persist: 0.8,

@@ -153,6 +153,7 @@ impl Trainer<'_> {
                 transients_of(&sf, &tc, &self.bounds, spacing, sh, left, tracker.as_ref());
             report.frames.push((f.id.clone(), r.sum, fs.picked));
             report.tracked += fs.tracked;
+            report.rejected += fs.rejected;
             report.over_budget += fs.over;
             all.append(&t);
         }

@@ -15,7 +15,7 @@ use super::track::{Track, Tracker};
 use crate::data::Bounds;
 use crate::kernels::raster::Camera;
 use crate::model::gaussians::{inverse_sigmoid, rgb_to_sh_dc, HostGaussians};
-use crate::train::config::TransientConfig;
+use crate::train::config::{TransientConfig, TransientMode};
 
 /// What one spawn did (logged).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -29,6 +29,8 @@ pub struct SpawnReport {
     pub tracked: usize,
     /// Pixels over the error threshold that the budget left out.
     pub over_budget: usize,
+    /// Still depth hypotheses no neighbour confirmed, not spawned.
+    pub rejected: usize,
     /// Wall-clock milliseconds the spawn took (renders, read-backs, tracking, upload).
     pub ms: f64,
     /// The Gaussian budget was full: nothing was rendered.
@@ -69,6 +71,13 @@ impl std::fmt::Display for SpawnReport {
         )?;
         if self.tracked > 0 {
             write!(f, "; {} pixels tracked", self.tracked)?;
+        }
+        if self.rejected > 0 {
+            write!(
+                f,
+                "; {} depth hypotheses no neighbour confirmed",
+                self.rejected
+            )?;
         }
         if self.improving > 0 {
             write!(f, "; {} improving frames left to training", self.improving)?;
@@ -209,6 +218,8 @@ pub struct FrameSpawn {
     pub tracked: usize,
     /// Transients the budget left out.
     pub over: usize,
+    /// Still depth hypotheses no neighbour confirmed (`Tracker::confirms_still`).
+    pub rejected: usize,
 }
 
 /// The transients of one frame: up to `room` of them (the rest counted as over budget).
@@ -238,6 +249,8 @@ pub fn transients_of(
         ..Default::default()
     };
     let k = cfg.depths as usize;
+    // `auto`'s rule: a still hypothesis must be confirmed by a neighbour that sees it.
+    let confirm = cfg.confirm && cfg.mode == TransientMode::Auto;
     let tau = (cfg.init_frames.max(cfg.floor_frames) * spacing)
         .max(1e-6)
         .ln();
@@ -287,13 +300,12 @@ pub fn transients_of(
                 continue;
             }
             let z = z0 + (z1 - z0) * (j as f32 + 0.5) / k as f32;
-            push(
-                &mut g,
-                std::array::from_fn(|a| o[a] + d[a] * z),
-                z,
-                [0.0; 3],
-                c,
-            );
+            let p = std::array::from_fn(|a| o[a] + d[a] * z);
+            if confirm && tracker.is_some_and(|t| !t.confirms_still(x, y, p)) {
+                out.rejected += 1;
+                continue;
+            }
+            push(&mut g, p, z, [0.0; 3], c);
         }
     }
     g.transients = g.len();

@@ -124,10 +124,8 @@ impl<'a> Residual<'a> {
         Patch::of(self.gt, self.camera.width, self.camera.height, x, y)
     }
 
-    /// The hot pixel within [`SLACK`] of where `p` projects whose patch is closest to `c`, and
-    /// its distance from `c`; `None` when it projects behind the camera, outside, or onto no
-    /// hot pixel with a patch within [`COLOUR_TOL`].
-    fn explains(&self, p: [f32; 3], c: &Patch) -> Option<(f32, u32, u32)> {
+    /// The pixel `p` projects to (possibly outside the image); `None` behind the camera.
+    fn project(&self, p: [f32; 3]) -> Option<(i64, i64)> {
         let cam = self.camera;
         let q: [f32; 3] = std::array::from_fn(|r| {
             (0..3).map(|a| cam.rot[r][a] * p[a]).sum::<f32>() + cam.trans[r]
@@ -137,7 +135,22 @@ impl<'a> Residual<'a> {
         }
         let u = (cam.fx * q[0] / q[2] + cam.cx).floor() as i64;
         let v = (cam.fy * q[1] / q[2] + cam.cy).floor() as i64;
-        let (w, h) = (cam.width as i64, cam.height as i64);
+        Some((u, v))
+    }
+
+    /// Whether `p` projects inside the image, in front of the camera.
+    fn sees(&self, p: [f32; 3]) -> bool {
+        let (w, h) = (self.camera.width as i64, self.camera.height as i64);
+        self.project(p)
+            .is_some_and(|(u, v)| (0..w).contains(&u) && (0..h).contains(&v))
+    }
+
+    /// The hot pixel within [`SLACK`] of where `p` projects whose patch is closest to `c`, and
+    /// its distance from `c`; `None` when it projects behind the camera, outside, or onto no
+    /// hot pixel with a patch within [`COLOUR_TOL`].
+    fn explains(&self, p: [f32; 3], c: &Patch) -> Option<(f32, u32, u32)> {
+        let (u, v) = self.project(p)?;
+        let (w, h) = (self.camera.width as i64, self.camera.height as i64);
         let mut best: Option<(f32, u32, u32)> = None;
         for y in (v - SLACK).max(0)..=(v + SLACK).min(h - 1) {
             for x in (u - SLACK).max(0)..=(u + SLACK).min(w - 1) {
@@ -224,6 +237,26 @@ impl<'a> Tracker<'a> {
             bounds: *bounds,
             v_max,
         }
+    }
+
+    /// Whether a still point `p` on pixel (x, y)'s ray is worth spawning: some neighbour that
+    /// sees it is wrong there with the pixel's patch (the evidence a track needs, for one still
+    /// point in one view), or no neighbour sees it. A depth hypothesis on a surface another
+    /// view draws right is a floater there (D-NeRF trex: a spawn's hypotheses cost test views
+    /// at its time 0.7–2.7 dB, docs/measurements.md).
+    pub fn confirms_still(&self, x: u32, y: u32, p: [f32; 3]) -> bool {
+        let c = &self.frame.patch(x, y);
+        let mut seen = false;
+        for n in &self.neighbours {
+            if !n.sees(p) {
+                continue;
+            }
+            seen = true;
+            if n.explains(p, c).is_some() {
+                return true;
+            }
+        }
+        !seen
     }
 
     /// Neighbours besides the anchor that a track must explain.

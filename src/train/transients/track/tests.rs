@@ -352,3 +352,75 @@ fn a_tracked_transient_is_drawn_where_its_track_says_at_other_times() {
         tr.required()
     );
 }
+
+#[test]
+fn a_still_hypothesis_is_kept_where_a_neighbour_confirms_it() {
+    // A still ball missing from five frames. On the ray of a ball pixel of frame 2, the point
+    // at the ball is wrong in the neighbours that see it, with the ball's patch: confirmed. A
+    // point on the same ray a unit nearer projects onto background the neighbours draw right
+    // (black on black): rejected, it would be a floater there. With no neighbour, nothing
+    // says otherwise: kept.
+    let bounds = cube();
+    let cams = five_cameras_128();
+    let p0 = [-0.3f32, 0.2, 0.1];
+    let imgs: Vec<_> = (0..5).map(|i| frame(&cams[i], p0, ORANGE)).collect();
+    let res = |i: usize| Residual::new(&cams[i], i as f32 * 0.1, &imgs[i].1, &imgs[i].0, 0.1);
+    let tr = Tracker::new(res(2), vec![res(1), res(3), res(0), res(4)], 100.0, &bounds);
+    let (x, y) = pixel_of(&cams[2], p0);
+    let (o, d) = pixel_ray(&cams[2], x, y);
+    let dot = |u: [f32; 3], v: [f32; 3]| (0..3).map(|a| u[a] * v[a]).sum::<f32>();
+    let z = dot(std::array::from_fn(|a| p0[a] - o[a]), d) / dot(d, d);
+    let at = |z: f32| -> [f32; 3] { std::array::from_fn(|a| o[a] + d[a] * z) };
+    assert!(tr.confirms_still(x, y, at(z)), "the ball's own depth");
+    assert!(
+        !tr.confirms_still(x, y, at(z - 1.0)),
+        "a unit in front of the ball"
+    );
+    assert!(!tr.confirms_still(x, y, at(z + 1.0)), "a unit behind it");
+    let alone = Tracker::new(res(2), Vec::new(), 100.0, &bounds);
+    assert!(
+        alone.confirms_still(x, y, at(z - 1.0)),
+        "no neighbour: kept"
+    );
+}
+
+#[test]
+fn auto_spawns_no_depth_hypothesis_that_no_neighbour_confirms() {
+    // The ball jumps between frames (no track explains it), so frame 2's wrong pixels spawn
+    // still hypotheses at `depths` depths; no neighbour sees the ball where they are. `auto`
+    // (with `confirm`) spawns none of them; `on`, or `confirm = false`, spawns them all.
+    use crate::train::config::{TransientConfig, TransientMode};
+    use crate::train::transients::spawn::{transients_of, SpawnFrame};
+    let bounds = cube();
+    let cams = five_cameras_128();
+    let places = [
+        [1.5, 1.5, 0.0],
+        [-1.5, 1.2, 1.0],
+        [-0.3, 0.2, 0.1],
+        [1.4, -1.5, -1.0],
+        [-1.2, -1.2, 1.5],
+    ];
+    let imgs: Vec<_> = (0..5).map(|i| frame(&cams[i], places[i], ORANGE)).collect();
+    let res = |i: usize| Residual::new(&cams[i], i as f32 * 0.1, &imgs[i].1, &imgs[i].0, 0.1);
+    let tr = Tracker::new(res(2), vec![res(1), res(3), res(0), res(4)], 100.0, &bounds);
+    let f = SpawnFrame {
+        camera: &cams[2],
+        time: 0.2,
+        render: &imgs[2].1,
+        gt: &imgs[2].0,
+    };
+    let spawn = |mode, confirm| {
+        let cfg = TransientConfig {
+            mode,
+            confirm,
+            ..TransientConfig::default()
+        };
+        transients_of(&f, &cfg, &bounds, 0.1, 1, usize::MAX, Some(&tr))
+    };
+    let (kept, s) = spawn(TransientMode::On, true);
+    assert!(s.picked > 0 && s.tracked == 0, "{s:?}");
+    assert_eq!(kept.len(), 4 * s.picked, "on: every depth hypothesis");
+    assert_eq!(spawn(TransientMode::Auto, false).0.len(), kept.len());
+    let (auto, s) = spawn(TransientMode::Auto, true);
+    assert_eq!((auto.len(), s.rejected), (0, kept.len()), "{s:?}");
+}
