@@ -12,5 +12,10 @@ layout(std430, binding = 6) writeonly buffer NContrib { uint n_contrib[]; };
 layout(std430, binding = 7) readonly buffer Feat { float feat[]; };         // [N,FEAT]
 layout(std430, binding = 8) writeonly buffer OutFeat { float out_feat[]; }; // [H·W,FEAT]
 #endif
-// The overflow word (meta[64] of bin_total, bound alone); a blend ORs OVERFLOW_WALK_CUT into it.
+// The overflow word (meta[64] of bin_total, bound alone, last); a blend ORs OVERFLOW_WALK_CUT
+// into it. Bindings stay dense: 7 without the feature pair.
+#if FEAT > 0
 layout(std430, binding = 9) buffer Overflow { uint overflow_word; };
+#else
+layout(std430, binding = 7) buffer Overflow { uint overflow_word; };
+#endif
