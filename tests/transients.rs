@@ -9,6 +9,7 @@ mod train_common;
 
 use dispflow_vk::bench::step::make_quarter_transient;
 use dispflow_vk::model::gaussians::Section;
+use dispflow_vk::model::state::GaussianState;
 use dispflow_vk::testing;
 use dispflow_vk::train::config::{MotionWeights, SparsityMode, TrainConfig, TransientMode};
 use dispflow_vk::train::population::Reserve;
@@ -575,4 +576,66 @@ fn auto_with_a_closed_gate_trains_exactly_as_off() {
     );
     assert!(auto.model.gaussians.transient_rows().is_empty());
     assert!(auto == off, "auto with a closed gate differs from off");
+}
+
+/// `transient.resolve`: a pixel's still depth hypotheses are alternatives. At the next spawn
+/// (rows have not moved since theirs) each pixel keeps one and the others are dropped: their
+/// opacity logit at −30 with zero moments, so nothing carries them back before the prune.
+/// Which one is kept (the most opaque) is `resolve`'s unit test; here the trainer's wiring.
+#[test]
+fn resolve_keeps_one_depth_hypothesis_per_pixel() {
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let mut c = cfg();
+    c.transient.track = 0; // every picked pixel spawns `depths` (2) hypotheses
+    c.densify.until = 60; // no densification moves the rows after the first spawn
+    assert!(c.transient.resolve, "on by default");
+    c.transient.resolve = false;
+    let mut off = Trainer::new(&gpu, &c, &ds).unwrap();
+    train_common::run_to(&mut off, 60);
+    assert!(off.last_spawn.as_ref().is_some_and(|s| s.1.spawned > 0));
+    assert!(off.pending_hypotheses().is_none(), "resolve = false keeps them all");
+    drop(off);
+    c.transient.resolve = true;
+    let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
+    train_common::run_to(&mut tr, 60);
+    let (it, s) = tr.last_spawn.clone().unwrap();
+    let h = tr.pending_hypotheses().cloned().expect("the spawn at 60");
+    assert_eq!((it, h.iteration), (60, 60));
+    assert_eq!(h.groups.len() * 2, s.spawned, "{s}");
+    assert!(h.groups.iter().all(|g| g.len() == 2));
+    let span = h.span();
+    let t = tr.model.gaussians.transient_rows();
+    assert_eq!(span, t.start..t.end);
+    let k = span.end - span.start;
+    let read = |tr: &Trainer, b: fn(&GaussianState) -> &dispflow_vk::vk::Buffer| -> Vec<f32> {
+        let g = &tr.model.gaussians;
+        gpu.read(g.layout.rows(b(g), Section::Opacity, span.start, k))
+            .unwrap()
+    };
+    train_common::run_to(&mut tr, 89);
+    let before = read(&tr, |g| &g.params);
+    assert!(before.iter().all(|&l| l > -20.0), "nothing dropped yet");
+    train_common::run_to(&mut tr, 90);
+    let (rit, r) = tr.last_resolved.expect("resolved at the next spawn");
+    assert_eq!(rit, 90);
+    assert_eq!((r.pixels, r.dropped), (h.groups.len(), h.groups.len()));
+    let after = read(&tr, |g| &g.params);
+    let (m, v) = (read(&tr, |g| &g.m), read(&tr, |g| &g.v));
+    for grp in &h.groups {
+        let at = |r: u32| (r - span.start) as usize;
+        let kept: Vec<u32> = grp.clone().filter(|&r| after[at(r)] != -30.0).collect();
+        assert_eq!(kept.len(), 1, "pixel rows {grp:?}: {after:?}");
+        let best = grp.clone().map(|r| before[at(r)]).fold(f32::MIN, f32::max);
+        // One Adam step (opacity rate 0.05) lies between the read and the resolution.
+        assert!(
+            before[at(kept[0])] >= best - 0.1,
+            "kept {kept:?} of {grp:?}"
+        );
+        for r in grp.clone().filter(|&r| r != kept[0]) {
+            assert_eq!((m[at(r)], v[at(r)]), (0.0, 0.0), "row {r}'s moments");
+        }
+    }
 }

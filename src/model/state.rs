@@ -117,6 +117,49 @@ impl GaussianState {
         Ok(())
     }
 
+    /// Opacity logits of live rows `span`.
+    pub fn read_opacity(&self, gpu: &Gpu, span: std::ops::Range<u32>) -> Result<Vec<f32>> {
+        let k = span.end.saturating_sub(span.start);
+        if span.end > self.n || k == 0 {
+            return Ok(Vec::new());
+        }
+        gpu.read(
+            self.layout
+                .rows(&self.params, Section::Opacity, span.start, k),
+        )
+    }
+
+    /// Gives live rows `rows` (each inside `span`) the opacity logit `logit` and zero opacity
+    /// moments, so the optimiser does not carry them back: a row dropped this way draws
+    /// nothing and the next densification prunes it.
+    pub fn set_opacity(
+        &self,
+        gpu: &Gpu,
+        span: std::ops::Range<u32>,
+        rows: &[u32],
+        logit: f32,
+    ) -> Result<()> {
+        if rows.is_empty() {
+            return Ok(());
+        }
+        if span.end > self.n || rows.iter().any(|r| !span.contains(r)) {
+            return Err(Error::Invalid(format!(
+                "set_opacity: rows outside {span:?} of {} live",
+                self.n
+            )));
+        }
+        let k = span.end - span.start;
+        for (buf, value) in [(&self.params, logit), (&self.m, 0.0), (&self.v, 0.0)] {
+            let at = self.layout.rows(buf, Section::Opacity, span.start, k);
+            let mut x: Vec<f32> = gpu.read(at)?;
+            for &r in rows {
+                x[(r - span.start) as usize] = value;
+            }
+            gpu.upload(at, &x)?;
+        }
+        Ok(())
+    }
+
     /// Rows `0..n` of section `s` of the parameters.
     pub fn param(&self, s: Section) -> BufSlice<'_> {
         self.layout.slice(&self.params, s, self.n)

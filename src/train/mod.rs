@@ -111,6 +111,10 @@ pub struct Trainer<'g> {
     pub last_spawn: Option<(u32, transients::spawn::SpawnReport)>,
     /// Which frames spawns looked at and what they saw.
     looks: transients::spawn::Looks,
+    /// The last spawn's depth hypotheses, until resolved (`transient.resolve`).
+    hypotheses: Option<transients::resolve::Hypotheses>,
+    /// The last resolution of depth hypotheses and its iteration.
+    pub last_resolved: Option<(u32, transients::resolve::Resolved)>,
 }
 
 /// The temporal stage's constants for training frames `train`: σ's floor in time units
@@ -205,6 +209,8 @@ impl<'g> Trainer<'g> {
             background: data.background,
             last_spawn: None,
             looks: Default::default(),
+            hypotheses: None,
+            last_resolved: None,
         })
     }
 
@@ -301,6 +307,7 @@ impl<'g> Trainer<'g> {
             };
             self.iteration = p.iteration;
             self.last_plan = Some(p);
+            self.resolve_if_due(&p)?;
             self.densify_if_due(&p)?;
             if p.classify {
                 self.classify()?;
@@ -467,6 +474,7 @@ impl<'g> Trainer<'g> {
             blob.check_values()?;
         }
         self.passes()?;
+        self.hypotheses = None;
         self.model.restore(self.gpu, &c.model)?;
         let gpu = self.gpu;
         self.passes()?

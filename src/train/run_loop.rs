@@ -144,6 +144,7 @@ pub(super) fn train_loop(
     let mut dead_warned = false;
     let mut prune = None;
     let mut spawn_seen = None;
+    let mut resolved_seen = None;
     let mut split_seen = None;
     let transients_on = cfg.transient.mode.spawns();
     progress.start(cfg.iterations, tr.iteration);
@@ -232,6 +233,16 @@ pub(super) fn train_loop(
             split_seen = tr.last_split.map(|s| s.0);
             if let Some((it, s)) = tr.last_split {
                 progress.note(&format!("split after iteration {it}: {s}"));
+            }
+        }
+        if tr.last_resolved.map(|s| s.0) != resolved_seen {
+            resolved_seen = tr.last_resolved.map(|s| s.0);
+            if let Some((it, r)) = tr.last_resolved {
+                progress.note(&format!(
+                    "depth hypotheses resolved after iteration {it}: {} pixels kept their most \
+                     opaque, {} dropped",
+                    r.pixels, r.dropped
+                ));
             }
         }
         if tr.last_spawn.as_ref().map(|s| s.0) != spawn_seen {

@@ -3,6 +3,7 @@
 //! transients they back-project into free rows of the budget.
 
 use super::residual::frame_residual;
+use super::resolve::Hypotheses;
 use super::spawn::{transients_of, SpawnFrame, SpawnReport, Verdict};
 use super::track::{Residual, Tracker};
 use crate::error::Result;
@@ -123,6 +124,8 @@ impl Trainer<'_> {
                 }
             }
         }
+        let first = self.model.gaussians.n;
+        let mut groups = Vec::new();
         let diag = (self.bounds.max - self.bounds.min).length();
         let v_max = MAX_STEP_OF_BOUNDS * diag / spacing.max(1e-9);
         for (r, i, render, gt) in &shots {
@@ -155,14 +158,21 @@ impl Trainer<'_> {
             report.tracked += fs.tracked;
             report.rejected += fs.rejected;
             report.over_budget += fs.over;
+            let at = first + all.len() as u32;
+            groups.extend(fs.groups.iter().map(|g| g.start + at..g.end + at));
             all.append(&t);
         }
         report.spawned = all.len();
         if !all.is_empty() && self.looks.opened.is_none() {
             self.looks.opened = Some(self.iteration);
         }
-        let first = self.model.gaussians.n;
         self.model.gaussians.append_transients(self.gpu, &all)?;
+        if tc.resolve && !groups.is_empty() {
+            self.hypotheses = Some(Hypotheses {
+                iteration: self.iteration,
+                groups,
+            });
+        }
         if let Some(s) = self.passes.as_ref() {
             s.densify.clear_stats(self.gpu, first, all.len() as u32)?;
         }

@@ -210,7 +210,7 @@ pub struct SpawnFrame<'a> {
 }
 
 /// What [`transients_of`] did with one frame.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct FrameSpawn {
     /// Pixels picked.
     pub picked: usize,
@@ -220,6 +220,9 @@ pub struct FrameSpawn {
     pub over: usize,
     /// Still depth hypotheses no neighbour confirmed (`Tracker::confirms_still`).
     pub rejected: usize,
+    /// The rows (of the returned Gaussians) of each pixel's still depth hypotheses, where a
+    /// pixel spawned more than one (`transient.resolve` keeps one of each).
+    pub groups: Vec<std::ops::Range<u32>>,
 }
 
 /// The transients of one frame: up to `room` of them (the rest counted as over budget).
@@ -294,6 +297,7 @@ pub fn transients_of(
         let Some((z0, z1)) = ray_box(o, d, bounds, cam.near.max(1e-3)) else {
             continue;
         };
+        let group = g.len() as u32;
         for j in 0..k {
             if g.len() >= room {
                 out.over += 1;
@@ -306,6 +310,9 @@ pub fn transients_of(
                 continue;
             }
             push(&mut g, p, z, [0.0; 3], c);
+        }
+        if g.len() as u32 > group + 1 {
+            out.groups.push(group..g.len() as u32);
         }
     }
     g.transients = g.len();
