@@ -305,3 +305,60 @@ fn transients_round_trip_and_a_version_3_checkpoint_still_loads() {
     let e = load_err(&plain);
     assert!(e.contains("9 transients among 3 Gaussians"), "{e}");
 }
+
+/// The spawns' state (their looks and the depth hypotheses waiting to be resolved) round-trips;
+/// one that names rows outside the transients, or frames the data does not have, is refused by
+/// name.
+#[test]
+fn the_spawn_state_round_trips_and_a_bad_one_is_refused_by_name() {
+    use dispflow_vk::train::transients::resolve::Hypotheses;
+    use dispflow_vk::train::transients::spawn::Looks;
+    use dispflow_vk::train::transients::SpawnState;
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("last.ckpt");
+    let mut c = host_checkpoint();
+    for g in [
+        &mut c.model.gaussians,
+        &mut c.model.gauss_m,
+        &mut c.model.gauss_v,
+    ] {
+        g.transients = 2;
+        g.time = vec![[0.0, 0.0], [0.4, -3.0], [0.4, -3.0]];
+        g.velocity = vec![[0.0; 3]; 3];
+    }
+    c.model.gauss_v.time = vec![[0.0, 0.0]; 3];
+    let mut looks = Looks::default();
+    let by_time = [3, 0, 2, 1];
+    assert_eq!(looks.candidates(&by_time, 2, 0.8, 1), vec![3, 2]);
+    looks.judge(3, 12.5, 0.8, 1);
+    looks.opened = Some(5);
+    c.spawns = Some(SpawnState {
+        looks,
+        hypotheses: Some(Hypotheses {
+            iteration: 5,
+            groups: vec![1..3],
+        }),
+    });
+    c.save(&p).unwrap();
+    let back = Checkpoint::load(&p).unwrap();
+    assert_eq!(back, c);
+    let s = back.spawns.unwrap();
+    let rows = c.model.gaussians.populations();
+    assert_eq!(s.problem(rows, Some(4)), None);
+    let e = s.problem(rows, Some(3)).expect("frame 3 of 3");
+    assert!(e.contains("frame 3; the data has 3 training frames"), "{e}");
+    // Hypotheses on a canonical row.
+    let mut bad = c.clone();
+    bad.spawns.as_mut().unwrap().hypotheses = Some(Hypotheses {
+        iteration: 5,
+        groups: vec![0..2],
+    });
+    bad.save(&p).unwrap();
+    let e = load_err(&p);
+    assert!(
+        e.contains("last.ckpt")
+            && e.contains("depth hypotheses at rows 0..2")
+            && e.contains("1..3"),
+        "{e}"
+    );
+}

@@ -11,6 +11,7 @@ use dispflow_vk::bench::step::make_quarter_transient;
 use dispflow_vk::model::gaussians::Section;
 use dispflow_vk::model::state::GaussianState;
 use dispflow_vk::testing;
+use dispflow_vk::train::checkpoint::Checkpoint;
 use dispflow_vk::train::config::{MotionWeights, SparsityMode, TrainConfig, TransientMode};
 use dispflow_vk::train::population::Reserve;
 use dispflow_vk::train::Trainer;
@@ -575,6 +576,12 @@ fn auto_with_a_closed_gate_trains_exactly_as_off() {
         "auto looked, off did not"
     );
     assert!(auto.model.gaussians.transient_rows().is_empty());
+    // The rounds' looks are auto's own state (a resumed run needs them); the rest is off's.
+    let mut auto = auto;
+    assert!(
+        auto.spawns.take().is_some(),
+        "auto's looks are checkpointed"
+    );
     assert!(auto == off, "auto with a closed gate differs from off");
 }
 
@@ -596,7 +603,10 @@ fn resolve_keeps_one_depth_hypothesis_per_pixel() {
     let mut off = Trainer::new(&gpu, &c, &ds).unwrap();
     train_common::run_to(&mut off, 60);
     assert!(off.last_spawn.as_ref().is_some_and(|s| s.1.spawned > 0));
-    assert!(off.pending_hypotheses().is_none(), "resolve = false keeps them all");
+    assert!(
+        off.pending_hypotheses().is_none(),
+        "resolve = false keeps them all"
+    );
     drop(off);
     c.transient.resolve = true;
     let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
@@ -638,4 +648,39 @@ fn resolve_keeps_one_depth_hypothesis_per_pixel() {
             assert_eq!((m[at(r)], v[at(r)]), (0.0, 0.0), "row {r}'s moments");
         }
     }
+}
+
+/// A transient run resumed from its checkpoint trains as the uninterrupted run, bit for bit:
+/// the spawns' looks (which candidate set comes next, each frame's last residual) and the
+/// depth hypotheses waiting to be resolved travel in the checkpoint, and so does the control
+/// nodes' KNN (over the canonical rows: with transients after them it used to be dropped and
+/// recomputed, which moved every parameter from the first step on). Taken at 75, after the
+/// spawn at 60 and before its resolution at 90.
+#[test]
+fn a_transient_run_resumed_between_spawns_trains_as_the_uninterrupted_one() {
+    std::env::set_var("LP_NUM_THREADS", "1");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tiny_dataset(tmp.path());
+    let gpu = testing::gpu();
+    let mut c = cfg();
+    c.transient.track = 0;
+    let mut a = Trainer::new(&gpu, &c, &ds).unwrap();
+    train_common::run_to(&mut a, 75);
+    assert!(a.pending_hypotheses().is_some(), "the spawn at 60 waits");
+    let path = tmp.path().join("75.ckpt");
+    a.checkpoint().unwrap().save(&path).unwrap();
+    let mut b = Trainer::new(&gpu, &c, &ds).unwrap();
+    b.restore(&Checkpoint::load(&path).unwrap()).unwrap();
+    assert_eq!(b.pending_hypotheses(), a.pending_hypotheses());
+    train_common::run_to(&mut a, 150);
+    train_common::run_to(&mut b, 150);
+    assert_eq!(a.last_resolved, b.last_resolved);
+    assert_eq!(
+        a.last_spawn.as_ref().map(|s| (s.0, s.1.frames.clone())),
+        b.last_spawn.as_ref().map(|s| (s.0, s.1.frames.clone()))
+    );
+    assert!(
+        a.checkpoint().unwrap() == b.checkpoint().unwrap(),
+        "the resumed run left the uninterrupted one"
+    );
 }

@@ -162,12 +162,13 @@ impl NodeState {
         self.upload(gpu, &p, None)
     }
 
-    /// Node parameters (and moments) on the host: `[4M]` each, and the KNN of the `n` live
-    /// Gaussians when it is current.
-    pub fn download(&self, gpu: &Gpu, n: u32) -> Result<NodeSnapshot> {
+    /// Node parameters (and moments) on the host: `[4M]` each, and the KNN of the `n`
+    /// canonical Gaussians when it is current for them under split generation `generation`
+    /// (a stale one is left out: the next blend recomputes it, as a resumed run then must).
+    pub fn download(&self, gpu: &Gpu, n: u32, generation: u64) -> Result<NodeSnapshot> {
         let rd = |b: &Buffer| gpu.read::<f32>(b.elems::<f32>(0, 4 * self.m as u64));
         let knn = match self.knn_for.get() {
-            Some((kn, _)) if kn == n && n > 0 => gpu.read::<u32>(self.knn_rows(n))?,
+            Some(f) if f == (n, generation) && n > 0 => gpu.read::<u32>(self.knn_rows(n))?,
             _ => Vec::new(),
         };
         Ok(NodeSnapshot {
@@ -188,7 +189,7 @@ impl NodeState {
         let k = self.cfg.knn as usize;
         if s.knn.len() != n as usize * k {
             return Err(Error::Invalid(format!(
-                "blob node_knn: {} entries; {n} Gaussians with deform_field.knn = {k} need {}",
+                "blob node_knn: {} entries; {n} canonical Gaussians with deform_field.knn = {k} need {}",
                 s.knn.len(),
                 n as usize * k
             )));

@@ -545,7 +545,11 @@ impl Model {
             mlp_v: gpu.read(d.v.all())?,
             dynamic: self.dynamic.download(gpu, g.canonical_rows().len())?,
             nodes: match &self.nodes {
-                Some(n) if n.placed() => Some(n.download(gpu, g.n)?),
+                // The KNN covers the canonical rows (what the deformation blends), not the
+                // transients after them.
+                Some(n) if n.placed() => {
+                    Some(n.download(gpu, g.canonical_rows().len(), self.dynamic.generation())?)
+                }
                 _ => None,
             },
         })
@@ -664,7 +668,8 @@ impl Model {
         if let Some(nodes) = self.nodes.as_mut() {
             match &s.nodes {
                 Some(v) => {
-                    let (n, generation) = (self.gaussians.n, self.dynamic.generation());
+                    let n = self.gaussians.canonical_rows().len();
+                    let generation = self.dynamic.generation();
                     nodes.restore(gpu, v, n, generation)?
                 }
                 None => nodes.clear(),

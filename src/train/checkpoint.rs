@@ -12,7 +12,9 @@
 //! canonical Gaussian) are the model's dynamic/static split (transients are never split).
 //! Version 4 adds the transient Gaussians: the header's `transients` (the last rows) and the
 //! blobs `time` (c, τ per Gaussian) and `velocity` (with their moments `m.`/`v.`), present
-//! only when there are transients.
+//! only when there are transients. The header's optional `spawns` (also version 4) is the
+//! spawn rounds' state: which candidate frames come next, each frame's last residual, and the
+//! depth hypotheses waiting to be resolved (`train::transients::SpawnState`).
 //! Small and dependency-free.
 
 use std::collections::BTreeMap;
@@ -28,6 +30,7 @@ use crate::model::gaussians::HostGaussians;
 use crate::model::nodes::NodeSnapshot;
 use crate::model::rows::Populations;
 use crate::model::state::{ModelShape, ModelSnapshot};
+use crate::train::transients::SpawnState;
 
 const MAGIC: &[u8; 8] = b"DFVKCKPT";
 
@@ -53,6 +56,9 @@ pub struct Checkpoint {
     /// The deformation rate's multiplier after collapse rollbacks (`None`: 1, never rolled
     /// back), so a resumed run keeps the rate the rollback chose.
     pub deform_lr_scale: Option<f64>,
+    /// The spawns' state (`None` before any spawn round), so a resumed run spawns as the
+    /// uninterrupted one.
+    pub spawns: Option<SpawnState>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -68,6 +74,9 @@ struct Header {
     /// The last rows that are transient Gaussians (version 4; 0 before).
     #[serde(default, skip_serializing_if = "is_zero")]
     transients: u32,
+    /// The spawns' looks and pending depth hypotheses (version 4, after any spawn round).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    spawns: Option<SpawnState>,
 }
 
 fn is_zero(v: &u32) -> bool {
@@ -248,6 +257,7 @@ impl Checkpoint {
             shape: self.model.shape,
             deform_lr_scale: self.deform_lr_scale,
             transients: self.model.gaussians.transient_rows().len(),
+            spawns: self.spawns.clone(),
             blobs: blobs
                 .iter()
                 .map(|(k, v)| BlobEntry {
@@ -476,9 +486,15 @@ impl Checkpoint {
                 ));
             }
         }
+        if let Some(p) =
+            (header.spawns.as_ref()).and_then(|s| s.problem(gaussians.populations(), None))
+        {
+            return Err(bad(path, &format!("header: {p}")));
+        }
         Ok(Checkpoint {
             iteration: header.iteration,
             deform_lr_scale: header.deform_lr_scale,
+            spawns: header.spawns,
             model: ModelSnapshot {
                 shape: header.shape,
                 gaussians,

@@ -408,8 +408,7 @@ pub struct TransientConfig {
     /// of their lifetime, where a wrong depth is a floater that densification would grow.
     /// On by default: D-NeRF trex +0.40 dB, standup seed 1 +0.55, mujoco-scene5 in the masks
     /// +0.01 / +0.26 over `auto` without it (docs/measurements.md, "Depth hypotheses as
-    /// alternatives"). A resumed run drops the pending ones unresolved (as it forgets the
-    /// spawns' looks).
+    /// alternatives"). Checkpoints carry the pending ones.
     pub resolve: bool,
     /// The share of the Gaussian budget kept for transients: the canonical population starts
     /// and densifies within the rest (so a scene whose initial points fill the budget still

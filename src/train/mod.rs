@@ -337,7 +337,11 @@ impl<'g> Trainer<'g> {
             return Ok(());
         };
         if p.deform_active && !ns.placed() {
-            let means = self.model.gaussians.download(self.gpu)?.means;
+            // On the canonical rows, which the field deforms: transients spawned before the
+            // deformation starts (the first spawn can come at its first step) are not its.
+            let g = &self.model.gaussians;
+            let mut means = g.download(self.gpu)?.means;
+            means.truncate(g.canonical_rows().len() as usize);
             ns.place(self.gpu, &means)?;
         }
         let every = ns.cfg.knn_every;
@@ -442,6 +446,11 @@ impl<'g> Trainer<'g> {
         Ok(Checkpoint {
             iteration: self.iteration,
             deform_lr_scale: (self.deform_lr_scale != 1.0).then_some(self.deform_lr_scale),
+            spawns: Some(transients::SpawnState {
+                looks: self.looks.clone(),
+                hypotheses: self.hypotheses.clone(),
+            })
+            .filter(|s| *s != transients::SpawnState::default()),
             model: self.model.checkpoint(self.gpu)?,
             densify_stats: match &self.passes {
                 Some(s) => s.densify.stats(self.gpu, self.n())?,
@@ -473,9 +482,15 @@ impl<'g> Trainer<'g> {
             };
             blob.check_values()?;
         }
+        let spawns = c.spawns.clone().unwrap_or_default();
+        let rows = c.model.gaussians.populations();
+        if let Some(p) = spawns.problem(rows, Some(self.frames.len())) {
+            return Err(Error::Invalid(p));
+        }
         self.passes()?;
-        self.hypotheses = None;
         self.model.restore(self.gpu, &c.model)?;
+        self.looks = spawns.looks;
+        self.hypotheses = spawns.hypotheses;
         let gpu = self.gpu;
         self.passes()?
             .densify

@@ -329,7 +329,7 @@ fn write_model_files(gpu: &Gpu, tr: &mut Trainer<'_>, out: &Path) -> Result<()> 
     let mlp = tr.model.deform.download(gpu)?;
     write_atomic(&out.join("deform.bin"), bytemuck::cast_slice(&mlp))?;
     if let Some(ns) = tr.model.nodes.as_ref().filter(|n| n.placed()) {
-        let p = ns.download(gpu, tr.n())?.params;
+        let p = ns.download(gpu, 0, 0)?.params; // the parameters only
         write_atomic(&out.join("nodes.bin"), bytemuck::cast_slice(&p))?;
     }
     let dynamic_bin = out.join("dynamic.bin");

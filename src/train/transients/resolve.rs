@@ -12,7 +12,8 @@ use crate::train::Trainer;
 use std::ops::Range;
 
 /// The still depth hypotheses of the last spawn, by pixel, in absolute rows.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Hypotheses {
     /// The spawn's iteration.
     pub iteration: u32,

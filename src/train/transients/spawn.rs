@@ -103,14 +103,16 @@ impl std::fmt::Display for SpawnReport {
 
 /// Which training frames the spawns look at, and each frame's localized residual at its last
 /// look (`transient.persist`) with how many successive looks it has persisted through.
-#[derive(Clone, Debug, Default)]
+/// Saved in checkpoints ([`super::SpawnState`]).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Looks {
     /// Candidate sets drawn (rotates them).
     rounds: usize,
     /// The candidates the next spawns look at again, and how many more times.
     recheck: Option<(Vec<usize>, u32)>,
-    last: std::collections::HashMap<usize, (f64, u32)>,
-    /// The iteration after which a spawn first added rows this launch (`auto`'s gate opened).
+    last: std::collections::BTreeMap<usize, (f64, u32)>,
+    /// The iteration after which a spawn first added rows (`auto`'s gate opened).
     pub opened: Option<u32>,
 }
 
@@ -127,6 +129,29 @@ pub enum Verdict {
 }
 
 impl Looks {
+    /// What is wrong with these looks for data of `frames` training frames, if anything: a
+    /// frame index past the data or a residual that is not a finite non-negative number.
+    pub fn problem(&self, frames: Option<usize>) -> Option<String> {
+        if let Some(n) = frames {
+            let recheck = self.recheck.iter().flat_map(|r| r.0.iter());
+            if let Some(f) = self.last.keys().chain(recheck).find(|&&f| f >= n) {
+                return Some(format!(
+                    "spawn state: frame {f}; the data has {n} training frames"
+                ));
+            }
+        }
+        let bad = self
+            .last
+            .iter()
+            .find(|(_, r)| !(r.0.is_finite() && r.0 >= 0.0));
+        bad.map(|(f, r)| {
+            format!(
+                "spawn state: frame {f}'s residual is {}; expected a finite non-negative number",
+                r.0
+            )
+        })
+    }
+
     /// The next spawn's `k` candidates from `window` (training frames in time order), rotating;
     /// with `persist` on, every set is looked at by `1 + need` successive spawns, so each
     /// residual is compared with itself `every` steps apart `need` times (a whole rotation can
