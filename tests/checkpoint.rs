@@ -336,7 +336,7 @@ fn the_spawn_state_round_trips_and_a_bad_one_is_refused_by_name() {
         looks,
         hypotheses: Some(Hypotheses {
             iteration: 5,
-            groups: vec![1..3],
+            groups: vec![1..2, 2..3],
         }),
     });
     c.save(&p).unwrap();
@@ -351,7 +351,7 @@ fn the_spawn_state_round_trips_and_a_bad_one_is_refused_by_name() {
     let mut bad = c.clone();
     bad.spawns.as_mut().unwrap().hypotheses = Some(Hypotheses {
         iteration: 5,
-        groups: vec![0..2],
+        groups: vec![0..2, 2..3],
     });
     bad.save(&p).unwrap();
     let e = load_err(&p);
