@@ -245,20 +245,36 @@ fn restore_refuses_non_finite_values_and_other_configurations() {
 /// Transient Gaussians (format version 4): the header's count and the `time` / `velocity` blobs
 /// (with their moments) round-trip; a version-3 checkpoint, written before transients, still
 /// loads as a model without them.
-#[test]
-fn transients_round_trip_and_a_version_3_checkpoint_still_loads() {
-    let tmp = tempfile::tempdir().unwrap();
-    let p = tmp.path().join("last.ckpt");
+/// [`host_checkpoint`] with its last `k` rows transient (centre 0.4, log-width −3, a velocity).
+fn with_transients(k: usize) -> Checkpoint {
     let mut c = host_checkpoint();
     for g in [
         &mut c.model.gaussians,
         &mut c.model.gauss_m,
         &mut c.model.gauss_v,
     ] {
-        g.transients = 1;
-        g.time = vec![[0.0, 0.0], [0.0, 0.0], [0.4, -3.0]];
-        g.velocity = vec![[0.0; 3], [0.0; 3], [0.5, -0.25, 1.0]];
+        g.transients = k;
+        g.time = (0..3)
+            .map(|i| if i + k >= 3 { [0.4, -3.0] } else { [0.0; 2] })
+            .collect();
+        g.velocity = (0..3)
+            .map(|i| {
+                if i + k >= 3 {
+                    [0.5, -0.25, 1.0]
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect();
     }
+    c
+}
+
+#[test]
+fn transients_round_trip_and_a_version_3_checkpoint_still_loads() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("last.ckpt");
+    let mut c = with_transients(1);
     c.model.gauss_v.time[2] = [0.01, 0.02]; // second moments are >= 0
     c.model.gauss_v.velocity[2] = [0.1, 0.2, 0.3];
     c.save(&p).unwrap();
@@ -316,17 +332,9 @@ fn the_spawn_state_round_trips_and_a_bad_one_is_refused_by_name() {
     use dispflow_vk::train::transients::SpawnState;
     let tmp = tempfile::tempdir().unwrap();
     let p = tmp.path().join("last.ckpt");
-    let mut c = host_checkpoint();
-    for g in [
-        &mut c.model.gaussians,
-        &mut c.model.gauss_m,
-        &mut c.model.gauss_v,
-    ] {
-        g.transients = 2;
-        g.time = vec![[0.0, 0.0], [0.4, -3.0], [0.4, -3.0]];
-        g.velocity = vec![[0.0; 3]; 3];
-    }
-    c.model.gauss_v.time = vec![[0.0, 0.0]; 3];
+    let mut c = with_transients(2);
+    c.model.gauss_v.time = vec![[0.0, 0.0]; 3]; // second moments are >= 0
+    c.model.gauss_v.velocity = vec![[0.0; 3]; 3];
     let mut looks = Looks::default();
     let by_time = [3, 0, 2, 1];
     assert_eq!(looks.candidates(&by_time, 2, 0.8, 1), vec![3, 2]);
