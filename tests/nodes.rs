@@ -6,6 +6,7 @@
 
 use dispflow_vk::kernels::nodes::{key_bits, BlendInputs, GatherShape, NodeKernels, NO_NODE};
 use dispflow_vk::kernels::radix_sort::passes;
+use dispflow_vk::kernels::shape::DeviceShape;
 use dispflow_vk::reference::nodes::{nodes_gather, nodes_knn, nodes_lbs, nodes_lbs_bwd, Slot};
 use dispflow_vk::testing::{self, assert_close, Noise, Tol};
 use dispflow_vk::vk::{Buffer, Recorder};
@@ -96,6 +97,12 @@ impl Gpu3 {
         Gpu3 { gpu, k }
     }
 
+    fn for_capacity(capacity: u32) -> Self {
+        let gpu = testing::gpu();
+        let k = NodeKernels::for_capacity(&gpu, capacity).unwrap();
+        Gpu3 { gpu, k }
+    }
+
     fn buf(&self, name: &str, v: &[f32]) -> Buffer {
         self.gpu.buffer_from(name, v).unwrap()
     }
@@ -168,9 +175,12 @@ fn knn_matches_brute_force_with_ties_few_nodes_and_a_split() {
 /// Forward, backward and gather on the GPU against the twin; `split`: through the dynamic
 /// rows (every third Gaussian static).
 fn blend_checked(p: &Problem, k: u32, split: bool, tol: f64, gather: GatherShape) {
+    blend_checked_on(&Gpu3::with_gather(gather), p, k, split, tol)
+}
+
+fn blend_checked_on(g: &Gpu3, p: &Problem, k: u32, split: bool, tol: f64) {
     // |gpu − twin| ≤ tol·(1 + |twin|)
     let tol = Tol::Elementwise { abs: tol, rel: tol };
-    let g = Gpu3::with_gather(gather);
     let n = p.n();
     let row_of: Vec<u32> = (0..n as u32)
         .map(|i| if split && i % 3 == 0 { NO_NODE } else { i })
@@ -367,3 +377,21 @@ fn extremes_stay_finite() {
     );
 }
 dispflow_vk::subgroup_reruns!();
+
+/// A node shared by 70 000 Gaussians: on lavapipe the `serial` gather (one invocation per node)
+/// would be cut at 65 535 pairs (measured: dL/dnode_out 190.6 against the twin's 218.1), so the
+/// kernels for a model that large run the tree there; below the limit they keep the device's
+/// shape. Fails with `for_capacity` choosing by the device alone.
+#[test]
+fn a_node_shared_by_more_gaussians_than_a_loop_may_run_gathers_them_all() {
+    use dispflow_vk::kernels::nodes::SERIAL_GATHER_MAX;
+    let n = 70_000;
+    let g = Gpu3::for_capacity(n as u32);
+    let device = GatherShape::for_device(&g.gpu.info);
+    if device == GatherShape::Serial {
+        assert_eq!(g.k.gather_shape(), GatherShape::Tree);
+    }
+    blend_checked_on(&g, &problem(8, n, 1), 1, false, 2e-4);
+    let small = NodeKernels::for_capacity(&g.gpu, SERIAL_GATHER_MAX).unwrap();
+    assert_eq!(small.gather_shape(), device);
+}

@@ -138,9 +138,29 @@ impl<'a> BlendInputs<'a> {
     }
 }
 
+/// The most Gaussians the `serial` gather sums exactly: a node holds at most one pair per
+/// Gaussian, and lavapipe ends an invocation's loops after 65 535 iterations in all
+/// (docs/development.md, "lavapipe limits"; `tests/nodes.rs`: a node of 70 000 pairs is cut).
+pub const SERIAL_GATHER_MAX: u32 = 65_535;
+
 impl NodeKernels {
     pub fn new(gpu: &Gpu) -> Result<Self> {
         Self::with_gather(gpu, GatherShape::for_device(&gpu.info))
+    }
+
+    /// The device's kernels for a model of at most `capacity` Gaussians: the `serial` gather
+    /// gives way to the tree above [`SERIAL_GATHER_MAX`], where it could be cut.
+    pub fn for_capacity(gpu: &Gpu, capacity: u32) -> Result<Self> {
+        let shape = match GatherShape::for_device(&gpu.info) {
+            GatherShape::Serial if capacity > SERIAL_GATHER_MAX => GatherShape::Tree,
+            s => s,
+        };
+        Self::with_gather(gpu, shape)
+    }
+
+    /// The gather's shape these kernels run.
+    pub fn gather_shape(&self) -> GatherShape {
+        self.gather_shape
     }
 
     /// The kernels with the gather of shape `gather` (tests and benches run both).

@@ -129,7 +129,7 @@ impl DeformPass {
             slots,
             nodes: field
                 .map(|f| -> Result<NodeField> {
-                    let kernels = NodeKernels::new(gpu)?;
+                    let kernels = NodeKernels::for_capacity(gpu, s.capacity)?;
                     Ok(NodeField {
                         bufs: kernels.buffers(gpu, s.capacity, f.nodes, f.knn)?,
                         kernels,
