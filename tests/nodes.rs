@@ -185,7 +185,7 @@ fn blend_checked_on(g: &Gpu3, p: &Problem, k: u32, split: bool, tol: f64) {
     let row_of: Vec<u32> = (0..n as u32)
         .map(|i| if split && i % 3 == 0 { NO_NODE } else { i })
         .collect();
-    let knn = knn_checked(&g, p, k, split.then_some(&row_of[..]));
+    let knn = knn_checked(g, p, k, split.then_some(&row_of[..]));
     let idx: Vec<u32> = (0..n as u32)
         .filter(|&i| row_of[i as usize] != NO_NODE)
         .collect();
