@@ -2,6 +2,8 @@
 //! the buffers densification writes the next generation into) and the deformation MLP
 //! (weights, gradients, Adam moments). Passes read and write it through explicit slices; the
 //! trainer never reaches into a pass for model data.
+//! (Over 600 lines: the Gaussians, the MLP, the nodes and the split are one model whose
+//! snapshot, checks and restore must agree field by field.)
 
 use super::deform::{MlpConfig, MlpLayout, TimeEncoding};
 use super::dynamic::{DynamicSet, SplitSnapshot};
