@@ -468,8 +468,9 @@ fn auto_spawns_once_a_residual_has_held_through_the_gate() {
     c.transient.mode = TransientMode::Auto;
     c.transient.persist = 1e-6; // every residual holds: the gate alone decides when
     c.transient.gate = 2;
-    c.transient.uncovered = 0.0; // the coverage and size rules: below
+    c.transient.uncovered = 0.0; // the coverage, size and lacking rules: below
     c.transient.min_residual = 0.0;
+    c.transient.unexplained = 0.0;
     assert_eq!(
         c.canonical_budget(),
         c.densify.budget,
@@ -548,6 +549,29 @@ fn auto_spawns_once_a_residual_has_held_through_the_gate() {
     train_common::run_to(&mut tr, 120);
     let (it, s) = tr.last_spawn.clone().unwrap();
     assert!(it == 120 && s.spawned == 0 && s.small == s.looked_at, "{s}");
+    // A lacking round opens what coverage keeps closed: frames whose true colour the render
+    // draws nowhere near (here: any such pixel) in enough of the round's frames (here: any),
+    // once the deformation trains (after iteration 60).
+    c.transient.min_residual = 0.0;
+    c.transient.uncovered = 1.0;
+    c.transient.unexplained = 1e-6;
+    c.transient.unexplained_frames = 1e-6;
+    let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
+    train_common::run_to(&mut tr, 120);
+    let (it, s) = tr.last_spawn.clone().unwrap();
+    assert!(
+        it == 120 && s.spawned > 0 && s.lacking > 0 && s.covered < s.looked_at,
+        "lacking frames did not open the gate: {s}"
+    );
+    // Not while the deformation is still: then every moving object is drawn nowhere near.
+    c.warm_up = 150;
+    let mut tr = Trainer::new(&gpu, &c, &ds).unwrap();
+    train_common::run_to(&mut tr, 120);
+    let (it, s) = tr.last_spawn.clone().unwrap();
+    assert!(
+        it == 120 && s.spawned == 0 && s.lacking > 0 && s.covered == s.looked_at,
+        "a still model's round opened the gate: {s}"
+    );
 }
 
 /// A scene that never opens `auto`'s gate pays nothing in quality: the run is bit for bit the

@@ -4,6 +4,7 @@
 
 use super::residual::frame_residual;
 use super::resolve::Hypotheses;
+use super::rules::{Admit, RoundRules};
 use super::spawn::{transients_of, SpawnFrame, SpawnReport, Verdict};
 use super::track::{Residual, Tracker};
 use crate::error::Result;
@@ -79,23 +80,32 @@ impl Trainer<'_> {
             let Some((render, gt)) = self.shot(i, view)? else {
                 continue;
             };
-            let r = frame_residual(&render, &gt, tc.min_error);
+            let width = self.frames[i].camera.width;
+            let r = frame_residual(&render, &gt, width, tc.min_error);
             shots.push((r, i, render, gt));
         }
         report.looked_at = shots.len();
+        let rules = RoundRules::of(
+            &tc,
+            &shots.iter().map(|s| s.0).collect::<Vec<_>>(),
+            view.deform_active,
+        );
+        if judged {
+            report.lacking = rules.lacking;
+        }
         shots.retain(|s| match self.looks.judge(s.1, s.0.sum, tc.persist, need) {
-            // The region must matter (the residual per pixel of the frame) and the model
-            // must draw nothing over most of it.
-            Verdict::Spawn
-                if judged && (s.0.sum / s.2.len().max(1) as f64) < tc.min_residual as f64 =>
-            {
-                report.small += 1;
-                false
-            }
-            Verdict::Spawn if judged && s.0.uncovered < tc.uncovered as f64 => {
-                report.covered += 1;
-                false
-            }
+            // `auto` judges every held frame, at the opening and at every round after it.
+            Verdict::Spawn if judged => match rules.admit(&tc, &s.0) {
+                Admit::Spawn => true,
+                Admit::Small => {
+                    report.small += 1;
+                    false
+                }
+                Admit::Covered => {
+                    report.covered += 1;
+                    false
+                }
+            },
             Verdict::Spawn => true,
             Verdict::FirstLook => {
                 report.first_looks += 1;

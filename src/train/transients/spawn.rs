@@ -46,6 +46,9 @@ pub struct SpawnReport {
     /// Frames through `auto`'s gate whose localized residual is too small to open it
     /// (`transient.min_residual`).
     pub small: usize,
+    /// Frames looked at (under `auto`) whose residual matters and whose truth the render
+    /// draws nowhere near (`transient.unexplained`), whether or not the round lets them spawn.
+    pub lacking: usize,
 }
 
 impl std::fmt::Display for SpawnReport {
@@ -93,6 +96,9 @@ impl std::fmt::Display for SpawnReport {
         }
         if self.small > 0 {
             write!(f, "; {} held frames wrong over too little", self.small)?;
+        }
+        if self.lacking > 0 {
+            write!(f, "; {} frames draw their truth nowhere near", self.lacking)?;
         }
         if self.over_budget > 0 {
             write!(f, "; {} pixels left out by the budget", self.over_budget)?;
