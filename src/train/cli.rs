@@ -195,8 +195,9 @@ pub struct TrainArgs {
     /// Transient Gaussians, a second population local in time for what moves most of its
     /// size per frame, appears, vanishes or splits (config [transient]): auto (spawned only
     /// once a frame's localized residual has held through transient.gate looks
-    /// transient.every steps apart, i.e. the canonical model cannot draw it; no budget is
-    /// reserved before; the fast preset's default), on (spawned every transient.every steps
+    /// transient.every steps apart where the model draws nothing, or in colours it draws
+    /// nowhere near in many frames of a round, i.e. the canonical model cannot draw it; no
+    /// budget is reserved before; the fast preset's default), on (spawned every transient.every steps
     /// from the frames with the largest held residual, a quarter of the budget reserved from
     /// the start) or off (the paper preset's default).
     #[arg(long, value_enum)]
