@@ -5,8 +5,8 @@
 //! (exact duplicates and shared depth planes), Gaussians outside the image and behind the
 //! camera, Gaussians without a box (fainter than 1/255), large Gaussians over many tiles, tall
 //! and wide grids, one tile, no Gaussian at all, and 20 000 Gaussians over 668 212
-//! intersections; with both splat extents. The depth-first path has no CPU twin of its own:
-//! this equality with the radix path (whose stages have twins) is its test.
+//! intersections; with both splat extents. Both match the binning's CPU twin
+//! (`reference::raster::bin`, whose depth-first route builds the list stage by stage).
 //!
 //! The lists and the forward outputs carry no float atomics and are compared at any lavapipe
 //! thread count; gradients are float-atomic sums, so that comparison re-runs itself with
@@ -176,6 +176,49 @@ fn binnings_give_the_same_lists_and_images() {
         same_bits(&format!("{ctx}: final T"), &fd.final_t, &fr.final_t);
         same_bits(&format!("{ctx}: features"), &fd.features, &fr.features);
         assert_eq!(fd.n_contrib, fr.n_contrib, "{ctx}: contributors");
+    });
+}
+
+/// Both binnings against the binning's CPU twin (`reference::raster::bin`), fed the GPU's own
+/// splat depths and tile rectangles: the same id list and ranges, and the twin's depth-first
+/// route, stage by stage, gives its radix route's list.
+#[test]
+fn binnings_match_the_twin() {
+    use dispflow_vk::kernels::raster::SPLAT_STRIDE;
+    use dispflow_vk::reference::raster::bin;
+    each_case(&CASES, |ctx, gpu, rast, _scene, cam, up, opts| {
+        let (tx, ty) = cam.tiles();
+        for b in Binning::ALL {
+            let (buf, _) = render_binned(gpu, rast, b, cam, up, opts);
+            let n = up.n as u64;
+            let splats: Vec<[f32; 4]> = gpu
+                .read(buf.splats.elems::<[f32; 4]>(0, n * SPLAT_STRIDE))
+                .unwrap();
+            let depth: Vec<u32> = (0..n as usize)
+                .map(|i| splats[i * SPLAT_STRIDE as usize][2].to_bits())
+                .collect();
+            let rects = buf.tile_rects(gpu, up.n).unwrap();
+            let want = bin::bin(&depth, &rects, tx, ty);
+            let name = b.name();
+            assert_eq!(
+                buf.tile_ranges(gpu).unwrap(),
+                want.ranges,
+                "{ctx}, {name}: ranges"
+            );
+            let got = buf.intersection_ids(gpu).unwrap();
+            assert_eq!(got.len(), want.ids.len(), "{ctx}, {name}: list length");
+            if let Some(j) = (0..got.len()).find(|&j| got[j] != want.ids[j]) {
+                panic!(
+                    "{ctx}, {name}: intersection {j} is Gaussian {} on the GPU, {} in the twin",
+                    got[j], want.ids[j]
+                );
+            }
+            let d = bin::bin_depth_first(&depth, &rects, tx, ty);
+            assert!(
+                d.ids == want.ids && d.ranges == want.ranges,
+                "{ctx}: twin routes"
+            );
+        }
     });
 }
 

@@ -26,6 +26,7 @@
 // Index loops on purpose: they read like the GLSL they define.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bin;
 mod blend;
 mod project;
 

@@ -1,0 +1,197 @@
+//! CPU twin of the rasteriser's binning (`glsl/raster/bin_*.comp`, `kernels::binning`): the
+//! ordered list of tile intersections and the per-tile ranges the blends walk. Keys are
+//! `(tile << 32) | depth bits`, as the GPU's `uvec2(depth, tile)`; depth bits are the f32 view
+//! depth's bits (`floatBitsToUint`), which order as the depths for the positive depths a
+//! Gaussian with a tile has. Stage functions carry the GLSL stage's name and read their inputs
+//! in its binding order; [`bin`] is the whole list, [`bin_depth_first`] the same list built
+//! the depth-first way, stage by stage.
+
+/// A tile intersection's key: tile in the high word, depth bits in the low one.
+pub fn key(tile: u32, depth_bits: u32) -> u64 {
+    ((tile as u64) << 32) | depth_bits as u64
+}
+
+/// `bin_emit`: each Gaussian's intersections at its exclusive-scan offset, in row-major tile
+/// order of its rectangle `[x0, y0, x1, y1)`; entries past `capacity` dropped.
+pub fn bin_emit(
+    depth_bits: &[u32],
+    rects: &[[u32; 4]],
+    offsets: &[u32],
+    tiles_x: u32,
+    capacity: u32,
+) -> (Vec<u64>, Vec<u32>) {
+    let total = (0..rects.len()).map(|i| offsets[i] + area(rects[i])).max();
+    let len = total.unwrap_or(0).min(capacity) as usize;
+    let (mut keys, mut vals) = (vec![0u64; len], vec![0u32; len]);
+    for i in 0..rects.len() {
+        emit(
+            i,
+            depth_bits[i],
+            rects[i],
+            offsets[i],
+            tiles_x,
+            &mut keys,
+            &mut vals,
+        );
+    }
+    (keys, vals)
+}
+
+/// `bin_depth_keys`: one (depth bits, index) pair per Gaussian.
+pub fn bin_depth_keys(depth_bits: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    (depth_bits.to_vec(), (0..depth_bits.len() as u32).collect())
+}
+
+/// `bin_depth_counts`: the tile counts in depth order.
+pub fn bin_depth_counts(order: &[u32], counts: &[u32]) -> Vec<u32> {
+    order.iter().map(|&i| counts[i as usize]).collect()
+}
+
+/// `bin_emit_depth`: [`bin_emit`]'s keys with the j-th nearest Gaussian at offset `offsets[j]`.
+pub fn bin_emit_depth(
+    depth_bits: &[u32],
+    rects: &[[u32; 4]],
+    order: &[u32],
+    offsets: &[u32],
+    tiles_x: u32,
+    capacity: u32,
+) -> (Vec<u64>, Vec<u32>) {
+    let total = (0..order.len())
+        .map(|j| offsets[j] + area(rects[order[j] as usize]))
+        .max();
+    let len = total.unwrap_or(0).min(capacity) as usize;
+    let (mut keys, mut vals) = (vec![0u64; len], vec![0u32; len]);
+    for (j, &i) in order.iter().enumerate() {
+        let i = i as usize;
+        emit(
+            i,
+            depth_bits[i],
+            rects[i],
+            offsets[j],
+            tiles_x,
+            &mut keys,
+            &mut vals,
+        );
+    }
+    (keys, vals)
+}
+
+/// `bin_ranges`: per tile `[start, end)` in the sorted `keys` ((0, 0) for a tile without any).
+pub fn bin_ranges(keys: &[u64], tiles: u32) -> Vec<[u32; 2]> {
+    let mut r = vec![[0u32; 2]; tiles as usize];
+    for (j, k) in keys.iter().enumerate() {
+        let t = (k >> 32) as usize;
+        if j == 0 || (keys[j - 1] >> 32) as usize != t {
+            r[t][0] = j as u32;
+        }
+        r[t][1] = j as u32 + 1;
+    }
+    r
+}
+
+/// The binned list: Gaussian ids tile by tile, front to back, equal depths in index order, and
+/// the per-tile ranges (the radix path: emit, then one stable sort of the whole keys).
+pub struct Binned {
+    pub ids: Vec<u32>,
+    pub ranges: Vec<[u32; 2]>,
+}
+
+/// The whole binning of Gaussians with view-depth bits `depth_bits` and tile rectangles
+/// `rects` on a `tiles_x × tiles_y` grid (capacity unbounded).
+pub fn bin(depth_bits: &[u32], rects: &[[u32; 4]], tiles_x: u32, tiles_y: u32) -> Binned {
+    let offsets = exclusive_scan(&rects.iter().map(|&r| area(r)).collect::<Vec<_>>());
+    let (keys, vals) = bin_emit(depth_bits, rects, &offsets, tiles_x, u32::MAX);
+    sorted(keys, vals, tiles_x * tiles_y)
+}
+
+/// [`bin`] the depth-first way: the Gaussians stably sorted by depth, their counts in that
+/// order, scanned, the keys emitted in depth order, then stably sorted by tile alone.
+pub fn bin_depth_first(
+    depth_bits: &[u32],
+    rects: &[[u32; 4]],
+    tiles_x: u32,
+    tiles_y: u32,
+) -> Binned {
+    let (keys, vals) = bin_depth_keys(depth_bits);
+    let mut order: Vec<(u32, u32)> = keys.into_iter().zip(vals).collect();
+    order.sort_by_key(|&(k, _)| k); // stable: equal depths in index order
+    let order: Vec<u32> = order.into_iter().map(|(_, i)| i).collect();
+    let counts: Vec<u32> = rects.iter().map(|&r| area(r)).collect();
+    let offsets = exclusive_scan(&bin_depth_counts(&order, &counts));
+    let (keys, vals) = bin_emit_depth(depth_bits, rects, &order, &offsets, tiles_x, u32::MAX);
+    let mut e: Vec<(u64, u32)> = keys.into_iter().zip(vals).collect();
+    e.sort_by_key(|&(k, _)| k >> 32); // stable: the depth order within a tile stays
+    let keys: Vec<u64> = e.iter().map(|x| x.0).collect();
+    Binned {
+        ranges: bin_ranges(&keys, tiles_x * tiles_y),
+        ids: e.into_iter().map(|x| x.1).collect(),
+    }
+}
+
+fn sorted(keys: Vec<u64>, vals: Vec<u32>, tiles: u32) -> Binned {
+    let mut e: Vec<(u64, u32)> = keys.into_iter().zip(vals).collect();
+    e.sort_by_key(|&(k, _)| k); // stable: equal keys keep emit order, which is index order
+    let keys: Vec<u64> = e.iter().map(|x| x.0).collect();
+    Binned {
+        ranges: bin_ranges(&keys, tiles),
+        ids: e.into_iter().map(|x| x.1).collect(),
+    }
+}
+
+fn area(r: [u32; 4]) -> u32 {
+    r[2].saturating_sub(r[0]) * r[3].saturating_sub(r[1])
+}
+
+fn exclusive_scan(v: &[u32]) -> Vec<u32> {
+    let mut s = 0u32;
+    v.iter()
+        .map(|&c| {
+            let o = s;
+            s += c;
+            o
+        })
+        .collect()
+}
+
+fn emit(
+    i: usize,
+    depth_bits: u32,
+    r: [u32; 4],
+    mut o: u32,
+    tiles_x: u32,
+    keys: &mut [u64],
+    vals: &mut [u32],
+) {
+    for ty in r[1]..r[3] {
+        for tx in r[0]..r[2] {
+            if (o as usize) < keys.len() {
+                keys[o as usize] = key(ty * tiles_x + tx, depth_bits);
+                vals[o as usize] = i as u32;
+            }
+            o += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_ways_bin_alike_with_ties_broken_by_index() {
+        // Four Gaussians on a 2×2 grid; 1 and 3 share a depth, 2 is nearest.
+        let depth = [2.0f32, 3.0, 1.0, 3.0].map(f32::to_bits);
+        let rects = [[0, 0, 2, 1], [1, 0, 2, 2], [0, 0, 2, 2], [1, 1, 2, 2]];
+        let b = bin(&depth, &rects, 2, 2);
+        // Tile 0: 2 (1.0), 0 (2.0); tile 1: 2, 0, 1; tile 2: 2; tile 3: 2, 1, 3 (1 before 3).
+        assert_eq!(b.ids, [2, 0, 2, 0, 1, 2, 2, 1, 3]);
+        assert_eq!(b.ranges, [[0, 2], [2, 5], [5, 6], [6, 9]]);
+        let d = bin_depth_first(&depth, &rects, 2, 2);
+        assert_eq!((d.ids, d.ranges), (b.ids, b.ranges));
+        // A capacity cuts the emitted list, not the offsets.
+        let (k, v) = bin_emit(&depth, &rects, &[0, 2, 4, 8], 2, 5);
+        assert_eq!(v, [0, 0, 1, 1, 2]);
+        assert_eq!(k[4], key(0, depth[2]));
+        assert!(bin(&[], &[], 3, 2).ranges.iter().all(|r| r == &[0, 0]));
+    }
+}
