@@ -1,4 +1,8 @@
-//! The synthetic scene generator: determinism, the nerfies round trip, exact masks and flow.
+//! The synthetic scene generator: determinism, the nerfies round trip, exact masks and flow,
+//! and what `auto`'s lacking route reads on the `events` scene's own pictures.
+//!
+//! Over 600 lines on purpose: a list of independent claims about one generator, each a test
+//! with its own scene; splitting it would only add test binaries (each one a link and a start).
 
 mod data_util;
 

@@ -4,6 +4,9 @@
 //! `eval` (the same scores) and exported per frame by `render --ply` (only what is alive);
 //! the dynamic/static split over the canonical rows beside them; the motion term's gradient
 //! with the temporal weights attached and detached (`[transient] motion_weights`).
+//!
+//! Over 600 lines on purpose: each test trains the tiny scene through the trainer's whole
+//! transient path; one binary keeps one build and one device start for all of them.
 
 mod train_common;
 
