@@ -41,6 +41,9 @@ void main() {
     uint t = gl_LocalInvocationID.x;
     uint tile = gl_WorkGroupID.y * pc.tiles_x + gl_WorkGroupID.x;
     uvec2 range = ranges[tile];
+    // The other kernel of the pass draws this tile (BlendParams.list_min/list_max).
+    uint listed = range.y - range.x;
+    if (listed < pc.list_min || listed > pc.list_max) return;
     uvec2 origin = gl_WorkGroupID.xy * TILE;
 
     // Per pixel: transmittance, last contributor, upstream gradients, "behind" terms.

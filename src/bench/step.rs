@@ -10,6 +10,7 @@ use crate::data::builtin::builtin_scene;
 use crate::data::{self, synthetic::Preset as ScenePreset};
 use crate::error::Result;
 use crate::kernels::mlp_fused::FmaPeak;
+use crate::train::checkpoint::Checkpoint;
 use crate::train::config::{MotionWeights, Preset, TrainConfig};
 use crate::train::Trainer;
 use crate::vk::{Gpu, Recorder, Timings};
@@ -73,7 +74,7 @@ impl KernelSet {
 /// The choice before issue 14, the CPU set after it (3σ tile squares), the same kernels
 /// binning each splat to its opacity-aware box (issue 60), and today's CPU default (the same
 /// boxes binned depth first and the motion magnitude in runs, issue 60).
-pub const KERNEL_SETS: [KernelSet; 4] = [
+pub const KERNEL_SETS: [KernelSet; 5] = [
     KernelSet {
         name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
         mlp: "tiled",
@@ -117,6 +118,18 @@ pub const KERNEL_SETS: [KernelSet; 4] = [
         mlp: "rows",
         blend_fwd: "tile-regs",
         blend_bwd: "tile-accum",
+        nodes_gather: "serial",
+        loss_blur: "rows",
+        sort: "serial",
+        splat_extent: "opacity-box",
+        binning: "depth-first",
+        motion_norm: "runs",
+    },
+    KernelSet {
+        name: "the same, blends in bands of rows stepping over the splats that miss them",
+        mlp: "rows",
+        blend_fwd: "tile-bands",
+        blend_bwd: "tile-bands",
         nodes_gather: "serial",
         loss_blur: "rows",
         sort: "serial",
@@ -273,25 +286,50 @@ pub fn make_quarter_transient(tr: &mut Trainer) -> Result<()> {
 /// the splat extent: GPUs bin to the opacity-aware box too).
 pub fn default_set(gpu: &Gpu) -> usize {
     if gpu.info.kind == "CPU" {
-        3
+        4
     } else {
         0
     }
 }
 
-/// Times `steps` steps (after `warm`) of each scene × method × kernel set.
-pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> {
+/// Times `steps` steps (after `warm`) of each scene × method × kernel set; with `trained`
+/// (a fast-preset run of the built-in scene), also on that run's last checkpoint.
+pub fn run_step_bench(
+    gpu: &Gpu,
+    warm: u32,
+    steps: u32,
+    trained: Option<&std::path::Path>,
+) -> Result<Vec<StepRow>> {
+    let mut cases: Vec<(String, PathBuf, Option<Checkpoint>)> =
+        scenes()?.into_iter().map(|(s, d)| (s, d, None)).collect();
+    if let Some(run) = trained {
+        let path = crate::train::checkpoint::last_checkpoint(run);
+        let c = Checkpoint::load(&path)?;
+        let scene = format!("built-in, trained ({} it.)", c.iteration);
+        cases.push((scene, builtin_scene(ScenePreset::Small, 0)?, Some(c)));
+    }
     let mut rows = Vec::new();
-    for (scene, dir) in scenes()? {
+    for (scene, dir, ckpt) in &cases {
         for (method, weight) in [("baseline", 0.0f32), ("DispFlow", 0.1)] {
             let cfg = timed_config(weight);
-            let data = data::load(&dir, &cfg.load_options())?;
+            let data = data::load(dir, &cfg.load_options())?;
+            let new_trainer = |c: &TrainConfig| -> Result<Trainer> {
+                let mut tr = Trainer::new(gpu, c, &data)?;
+                if let Some(ck) = ckpt {
+                    tr.restore(ck).map_err(|e| {
+                        crate::error::Error::Invalid(format!(
+                            "bench --trained: cannot time the checkpoint of a run that is not \
+                             a fast-preset run of the built-in scene: {e}"
+                        ))
+                    })?;
+                }
+                tr.step(false, false)?; // builds the passes with this kernel set
+                Ok(tr)
+            };
             let mut trainers = Vec::new();
             for k in KERNEL_SETS {
                 k.apply();
-                let mut tr = Trainer::new(gpu, &cfg, &data)?;
-                tr.step(false, false)?; // builds the passes with this kernel set
-                trainers.push(tr);
+                trainers.push(new_trainer(&cfg)?);
             }
             KernelSet::clear_all();
             // The device's own kernel set (as `for_device` picks: CPU-shaped on lavapipe) with a
@@ -305,8 +343,7 @@ pub fn run_step_bench(gpu: &Gpu, warm: u32, steps: u32) -> Result<Vec<StepRow>> 
                 transient_rows.push((DETACHED_ROW, &detached));
             }
             for (_, c) in &transient_rows {
-                let mut tr = Trainer::new(gpu, c, &data)?;
-                tr.step(false, false)?;
+                let mut tr = new_trainer(c)?;
                 make_quarter_transient(&mut tr)?;
                 trainers.push(tr);
             }
@@ -397,6 +434,24 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
                 r.method,
                 r.median_ms / b.median_ms,
                 r.median_ms,
+                b.median_ms,
+                zone_pairs(b, r)
+            );
+        }
+    }
+    let (issue_set, bands) = (KERNEL_SETS[1].name, KERNEL_SETS[4].name);
+    for r in rows.iter().filter(|r| r.kernels == bands) {
+        if let (Some(a), Some(b)) = (find(r, issue_set), find(r, depth_first)) {
+            println!(
+                "{} {}: with the blends in bands the CPU step is {:.2}× faster than issue 60's \
+                 CPU set ({:.2} vs {:.2} ms) and {:.2}× than the same set with whole-tile \
+                 blends ({:.2} ms); per zone, whole tiles → bands: {}",
+                r.scene,
+                r.method,
+                a.median_ms / r.median_ms,
+                r.median_ms,
+                a.median_ms,
+                b.median_ms / r.median_ms,
                 b.median_ms,
                 zone_pairs(b, r)
             );

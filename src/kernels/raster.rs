@@ -137,7 +137,17 @@ pub struct BlendParams {
     pub abs_grad: u32,
     /// 1: the backward also accumulates the feature channels' share of slot 5 into slot 12.
     pub feat_op: u32,
+    /// The CPU-shaped blends draw only the tiles whose list holds `list_min..=list_max`
+    /// splats ([`BAND_LIST_MAX`]: the band kernels take the short lists).
+    pub list_min: u32,
+    pub list_max: u32,
 }
+
+/// The longest tile list the band blends walk: each splat of a list costs them up to two loop
+/// iterations (the step-over loop's and the walk's), and lavapipe ends an invocation's loops
+/// after 65 535 iterations in all; a longer list goes to the whole-tile kernel of the same
+/// pass (`blend_*_tile.glsl`, one iteration per splat), dispatched after it.
+pub const BAND_LIST_MAX: u32 = 32_000;
 
 /// Blend options.
 #[derive(Clone, Copy, Debug)]
@@ -374,11 +384,18 @@ pub enum BlendBwdVariant {
     /// 8 invocations per tile, 32 pixels each; per splat, the terms are summed over the whole
     /// tile and added with one atomic per component (`blend_bwd_tile.glsl`). CPU-shaped.
     TileAccum,
+    /// 32 invocations per tile, 8 pixels each, one subgroup per band of rows stepping over the
+    /// splats that miss its rows; per splat, the terms are summed over the band
+    /// (`blend_bwd_band.glsl`). CPU-shaped.
+    TileBands,
 }
 
 impl BlendBwdVariant {
-    pub const ALL: [BlendBwdVariant; 2] =
-        [BlendBwdVariant::SubgroupAtomic, BlendBwdVariant::TileAccum];
+    pub const ALL: [BlendBwdVariant; 3] = [
+        BlendBwdVariant::SubgroupAtomic,
+        BlendBwdVariant::TileAccum,
+        BlendBwdVariant::TileBands,
+    ];
 }
 
 /// The default for a device: per-tile accumulation on CPU devices (lavapipe: 10–14× the
@@ -389,13 +406,14 @@ impl BlendBwdVariant {
 impl DeviceShape for BlendBwdVariant {
     const ENV: &'static str = "DISPFLOW_BLEND_BWD";
     const ALL: &'static [Self] = &BlendBwdVariant::ALL;
-    const CPU: Self = BlendBwdVariant::TileAccum;
+    const CPU: Self = BlendBwdVariant::TileBands;
     const GPU: Self = BlendBwdVariant::SubgroupAtomic;
 
     fn name(self) -> &'static str {
         match self {
             BlendBwdVariant::SubgroupAtomic => "subgroup-atomic",
             BlendBwdVariant::TileAccum => "tile-accum",
+            BlendBwdVariant::TileBands => "tile-bands",
         }
     }
 }
@@ -412,10 +430,17 @@ pub enum BlendFwdVariant {
     /// 8 invocations per tile, 32 pixels each in registers; splats read with uniform loads, no
     /// barriers, no shared memory (`blend_fwd_tile.glsl`). CPU-shaped.
     TileRegs,
+    /// 32 invocations per tile, 8 pixels each in registers, one subgroup per band of rows
+    /// stepping over the splats that miss its rows (`blend_fwd_band.glsl`). CPU-shaped.
+    TileBands,
 }
 
 impl BlendFwdVariant {
-    pub const ALL: [BlendFwdVariant; 2] = [BlendFwdVariant::Shared, BlendFwdVariant::TileRegs];
+    pub const ALL: [BlendFwdVariant; 3] = [
+        BlendFwdVariant::Shared,
+        BlendFwdVariant::TileRegs,
+        BlendFwdVariant::TileBands,
+    ];
 }
 
 /// The default for a device: pixels in registers on CPU devices (lavapipe, `bench --suite
@@ -425,13 +450,14 @@ impl BlendFwdVariant {
 impl DeviceShape for BlendFwdVariant {
     const ENV: &'static str = "DISPFLOW_BLEND_FWD";
     const ALL: &'static [Self] = &BlendFwdVariant::ALL;
-    const CPU: Self = BlendFwdVariant::TileRegs;
+    const CPU: Self = BlendFwdVariant::TileBands;
     const GPU: Self = BlendFwdVariant::Shared;
 
     fn name(self) -> &'static str {
         match self {
             BlendFwdVariant::Shared => "shared",
             BlendFwdVariant::TileRegs => "tile-regs",
+            BlendFwdVariant::TileBands => "tile-bands",
         }
     }
 }
@@ -476,10 +502,10 @@ pub struct Rasterizer {
     bin_emit: ComputePipeline,
     bin_ranges: ComputePipeline,
     /// Per variant (its discriminant), per feature count.
-    blend_fwd: [[ComputePipeline; 4]; 2],
+    blend_fwd: [[ComputePipeline; 4]; 3],
     blend_fwd_variant: BlendFwdVariant,
     /// Per variant (its discriminant), per feature count.
-    blend_bwd: [[ComputePipeline; 4]; 2],
+    blend_bwd: [[ComputePipeline; 4]; 3],
     blend_bwd_variant: BlendBwdVariant,
     project_bwd: ComputePipeline,
     splat_extent: SplatExtent,
@@ -531,6 +557,12 @@ impl Rasterizer {
                     gpu.pipeline(&r::BLEND_FWD_TILE_F3)?,
                     gpu.pipeline(&r::BLEND_FWD_TILE_F6)?,
                 ],
+                [
+                    gpu.pipeline(&r::BLEND_FWD_BAND_F0)?,
+                    gpu.pipeline(&r::BLEND_FWD_BAND_F2)?,
+                    gpu.pipeline(&r::BLEND_FWD_BAND_F3)?,
+                    gpu.pipeline(&r::BLEND_FWD_BAND_F6)?,
+                ],
             ],
             blend_fwd_variant: BlendFwdVariant::for_device(&gpu.info),
             blend_bwd: [
@@ -545,6 +577,12 @@ impl Rasterizer {
                     gpu.pipeline(&r::BLEND_BWD_TILE_F2)?,
                     gpu.pipeline(&r::BLEND_BWD_TILE_F3)?,
                     gpu.pipeline(&r::BLEND_BWD_TILE_F6)?,
+                ],
+                [
+                    gpu.pipeline(&r::BLEND_BWD_BAND_F0)?,
+                    gpu.pipeline(&r::BLEND_BWD_BAND_F2)?,
+                    gpu.pipeline(&r::BLEND_BWD_BAND_F3)?,
+                    gpu.pipeline(&r::BLEND_BWD_BAND_F6)?,
                 ],
             ],
             blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
@@ -730,7 +768,38 @@ impl Rasterizer {
             num_gaussians: g.n,
             abs_grad: o.abs_grad as u32,
             feat_op: (o.detach_feature_weights && g.features.is_some()) as u32,
+            list_min: 0,
+            list_max: u32::MAX,
         }
+    }
+
+    /// The dispatches of a blend variant: the variant over the tile lists it walks, and for
+    /// the band kernels the whole-tile kernel (`whole`) over the longer lists.
+    fn blend_dispatches(
+        bands: bool,
+        own: usize,
+        whole: usize,
+        bp: &BlendParams,
+    ) -> Vec<(usize, BlendParams)> {
+        if !bands {
+            return vec![(own, *bp)];
+        }
+        vec![
+            (
+                own,
+                BlendParams {
+                    list_max: BAND_LIST_MAX,
+                    ..*bp
+                },
+            ),
+            (
+                whole,
+                BlendParams {
+                    list_min: BAND_LIST_MAX + 1,
+                    ..*bp
+                },
+            ),
+        ]
     }
 
     /// Records the forward pass into `b.out_*`.
@@ -812,12 +881,21 @@ impl Rasterizer {
             binds.extend([f, b.out_features.all()]);
         }
         binds.push(b.meta.slice(256, 4));
-        rec.dispatch(
-            &self.blend_fwd[self.blend_fwd_variant as usize][variant(g.feature_dims()).unwrap()],
+        let v = self.blend_fwd_variant;
+        let ds = Self::blend_dispatches(
+            v == BlendFwdVariant::TileBands,
+            v as usize,
+            BlendFwdVariant::TileRegs as usize,
             &bp,
-            &binds,
-            [tx.max(1), ty.max(1), 1],
         );
+        for (k, p) in ds {
+            rec.dispatch(
+                &self.blend_fwd[k][variant(g.feature_dims()).unwrap()],
+                &p,
+                &binds,
+                [tx.max(1), ty.max(1), 1],
+            );
+        }
     }
 
     /// The radix binning: (tile | depth) keys per intersection, sorted, then the ranges.
@@ -975,12 +1053,21 @@ impl Rasterizer {
             rec.fill(b.d_features.all(), 0);
             binds.extend([f, df, b.d_features.all()]);
         }
-        rec.dispatch(
-            &self.blend_bwd[self.blend_bwd_variant as usize][variant(g.feature_dims()).unwrap()],
+        let v = self.blend_bwd_variant;
+        let ds = Self::blend_dispatches(
+            v == BlendBwdVariant::TileBands,
+            v as usize,
+            BlendBwdVariant::TileAccum as usize,
             &bp,
-            &binds,
-            [tx.max(1), ty.max(1), 1],
         );
+        for (k, p) in ds {
+            rec.dispatch(
+                &self.blend_bwd[k][variant(g.feature_dims()).unwrap()],
+                &p,
+                &binds,
+                [tx.max(1), ty.max(1), 1],
+            );
+        }
     }
 
     /// The projection backward of `backward` alone: `b.grad2d` (as the blend left it, plus
