@@ -434,12 +434,13 @@ pub struct BenchArgs {
     /// Step: timed steps per kernel set (the table reports the median).
     #[arg(long, default_value_t = 5)]
     pub steps: u32,
-    /// Step: also time every kernel set on a trained model, the last checkpoint of this run
-    /// directory: a fast-preset run of the built-in scene (`dispflow-vk train`'s output,
-    /// `runs/builtin`). Its splats are the small, dense ones a run spends most of its steps on;
-    /// the default rows time the initial points.
-    #[arg(long, value_name = "RUN_DIR")]
-    pub trained: Option<std::path::PathBuf>,
+    /// Step: also time every kernel set on trained models, the last checkpoints of these
+    /// finished fast-preset run directories (comma-separated; `dispflow-vk train`'s output,
+    /// e.g. the quickstart's `runs/builtin`; the scene is the run's `metrics.json` dataset).
+    /// Their splats are the small, dense ones a run spends most of its steps on; the default
+    /// rows time the initial points.
+    #[arg(long, value_name = "RUN_DIR", value_delimiter = ',')]
+    pub trained: Vec<std::path::PathBuf>,
     /// Field: Gaussians of each scene's model (its points grown by jittered copies; 0 = the
     /// initial points) — a trained fast-preset run of mujoco-scene7 holds about 20 000.
     #[arg(long, default_value_t = 20_000)]
@@ -616,7 +617,7 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
         rows.extend(mlp_table::mlp_rows(&gpu, &args.mlp_sizes, args.reps)?);
     }
     if has(Suite::Step) {
-        let st = step::run_step_bench(&gpu, args.warm_steps, args.steps, args.trained.as_deref())?;
+        let st = step::run_step_bench(&gpu, args.warm_steps, args.steps, &args.trained)?;
         rows.extend(step::report(&gpu, &st, args.reps)?);
     }
     if has(Suite::Sparsity) {

@@ -72,8 +72,9 @@ impl KernelSet {
 }
 
 /// The choice before issue 14, the CPU set after it (3σ tile squares), the same kernels
-/// binning each splat to its opacity-aware box (issue 60), and today's CPU default (the same
-/// boxes binned depth first and the motion magnitude in runs, issue 60).
+/// binning each splat to its opacity-aware box (issue 60), the same boxes binned depth first
+/// with the motion magnitude in runs (issue 60), and today's CPU default: that set with the
+/// blends in bands (issue 60).
 pub const KERNEL_SETS: [KernelSet; 5] = [
     KernelSet {
         name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
@@ -292,21 +293,42 @@ pub fn default_set(gpu: &Gpu) -> usize {
     }
 }
 
-/// Times `steps` steps (after `warm`) of each scene × method × kernel set; with `trained`
-/// (a fast-preset run of the built-in scene), also on that run's last checkpoint.
+/// A finished run's scene name and dataset directory, from its `metrics.json`.
+fn trained_scene(run: &std::path::Path) -> Result<(String, PathBuf)> {
+    let path = run.join("metrics.json");
+    let bad = |why: String| {
+        crate::error::Error::Invalid(format!("bench --trained: {}: {why}", path.display()))
+    };
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| bad(format!("{e} (a finished run writes it)")))?;
+    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let field = |k: &str| {
+        v.get(k)
+            .and_then(|x| x.as_str())
+            .map(str::to_string)
+            .ok_or_else(|| bad(format!("no string field `{k}`")))
+    };
+    Ok((field("scene")?, PathBuf::from(field("dataset")?)))
+}
+
+/// Times `steps` steps (after `warm`) of each scene × method × kernel set, and of each
+/// `trained` run (fast preset) on its last checkpoint.
 pub fn run_step_bench(
     gpu: &Gpu,
     warm: u32,
     steps: u32,
-    trained: Option<&std::path::Path>,
+    trained: &[PathBuf],
 ) -> Result<Vec<StepRow>> {
     let mut cases: Vec<(String, PathBuf, Option<Checkpoint>)> =
         scenes()?.into_iter().map(|(s, d)| (s, d, None)).collect();
-    if let Some(run) = trained {
-        let path = crate::train::checkpoint::last_checkpoint(run);
-        let c = Checkpoint::load(&path)?;
-        let scene = format!("built-in, trained ({} it.)", c.iteration);
-        cases.push((scene, builtin_scene(ScenePreset::Small, 0)?, Some(c)));
+    for run in trained {
+        let (scene, dir) = trained_scene(run)?;
+        let c = Checkpoint::load(&crate::train::checkpoint::last_checkpoint(run))?;
+        cases.push((
+            format!("{scene}, trained ({} it.)", c.iteration),
+            dir,
+            Some(c),
+        ));
     }
     let mut rows = Vec::new();
     for (scene, dir, ckpt) in &cases {
@@ -318,8 +340,8 @@ pub fn run_step_bench(
                 if let Some(ck) = ckpt {
                     tr.restore(ck).map_err(|e| {
                         crate::error::Error::Invalid(format!(
-                            "bench --trained: cannot time the checkpoint of a run that is not \
-                             a fast-preset run of the built-in scene: {e}"
+                            "bench --trained: cannot time {scene}'s checkpoint with the fast \
+                             preset: {e}"
                         ))
                     })?;
                 }

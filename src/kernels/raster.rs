@@ -398,11 +398,14 @@ impl BlendBwdVariant {
     ];
 }
 
-/// The default for a device: per-tile accumulation on CPU devices (lavapipe: 10–14× the
-/// subgroup kernel on the issue-14 scenes, `bench --suite raster`); the subgroup kernel on
-/// GPUs, where an 8-invocation workgroup per tile leaves most of a warp idle (the whole
+/// The default for a device: bands on CPU devices (lavapipe: 1.6–1.8× the per-tile
+/// accumulation on the issue-14 scenes and on a trained model's step, which was itself 10–14×
+/// the subgroup kernel, `bench --suite raster`; docs/measurements.md, "Blends in bands"), with
+/// `TileAccum` drawing the tiles whose list is longer than [`BAND_LIST_MAX`]; the subgroup
+/// kernel on GPUs, where a few invocations per tile leave most of a warp idle (the whole
 /// CPU-shaped step measured 6.8–7.9× slower on an H200, docs/gpu_h200.md).
-/// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum` overrides the choice (benches, tests).
+/// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum|tile-bands` overrides the choice (benches,
+/// tests).
 impl DeviceShape for BlendBwdVariant {
     const ENV: &'static str = "DISPFLOW_BLEND_BWD";
     const ALL: &'static [Self] = &BlendBwdVariant::ALL;
@@ -443,10 +446,11 @@ impl BlendFwdVariant {
     ];
 }
 
-/// The default for a device: pixels in registers on CPU devices (lavapipe, `bench --suite
-/// raster`); the shared-memory kernel on GPUs, where an 8-invocation workgroup per tile
-/// leaves most of a warp idle (measured on an H200 with the backward: docs/gpu_h200.md).
-/// `DISPFLOW_BLEND_FWD=shared|tile-regs` overrides the choice (benches, tests).
+/// The default for a device: pixels in registers, in bands, on CPU devices (lavapipe, `bench
+/// --suite raster`: 1.5–1.7× `TileRegs`, which draws the tiles whose list is longer than
+/// [`BAND_LIST_MAX`]); the shared-memory kernel on GPUs, where a few invocations per tile
+/// leave most of a warp idle (measured on an H200 with the backward: docs/gpu_h200.md).
+/// `DISPFLOW_BLEND_FWD=shared|tile-regs|tile-bands` overrides the choice (benches, tests).
 impl DeviceShape for BlendFwdVariant {
     const ENV: &'static str = "DISPFLOW_BLEND_FWD";
     const ALL: &'static [Self] = &BlendFwdVariant::ALL;
