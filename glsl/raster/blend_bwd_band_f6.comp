@@ -1,6 +1,7 @@
 #version 460
-// Blend backward, one subgroup per band of the tile (body in blend_bwd_band.glsl), 6 extra
-// feature channels; 8 pixels per invocation, 32 invocations per tile.
+// Blend backward in bands (body in blend_bwd_tile.glsl), 6 extra feature channels; 8 pixels
+// per invocation, 32 invocations per tile, splats that miss a band's rows stepped over.
 #define FEAT 6
 #define PX 8
-#include "blend_bwd_band.glsl"
+#define STEP_OVER
+#include "blend_bwd_tile.glsl"

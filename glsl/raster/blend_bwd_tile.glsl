@@ -1,23 +1,27 @@
 // Blend backward, per-tile accumulation: the same maths as blend_bwd.glsl (read its header),
-// with the loops swapped so each splat's gradient is summed over the whole tile before it
-// reaches memory. One workgroup per tile, TILE²/PX invocations, each owning PX pixels of the
-// tile (pixel q = invocation + WG·i) with their blend state in registers. Each subgroup walks
-// the tile's splats back to front on its own (no barrier, no shared memory); per splat it
-// evaluates its PX pixel groups, summing the terms per lane, then folds the lanes once
-// (subgroupAdd) and one lane adds the sum with one float atomic per component. Pixel rows the
-// splat cannot reach (its record's `reach`) are skipped, as in the forward.
+// with the loops swapped so each splat's gradient is summed over a band of the tile before it
+// reaches memory. One workgroup per tile, TILE²/PX invocations, each owning PX pixels with
+// their blend state in registers; each subgroup owns a band of S·PX consecutive pixels (S =
+// its lanes, at most the workgroup) and walks the tile's splats back to front from its band's
+// last contributor on its own (no barrier, no shared memory). Per splat it evaluates its PX
+// pixels, sums the terms per lane, folds the lanes once (subgroupAdd) and one lane adds the sum
+// with one float atomic per component.
 //
-// Why on lavapipe: a workgroup is ceil(WG/8) coroutines of 8 SIMD lanes. The subgroup kernel
-// pays, per splat and tile, one subgroupAdd and one float atomic per component for every one
-// of its 32 coroutines, and stages splats in shared memory behind barriers; with PX = 32 the
-// workgroup is one coroutine, so per splat and tile it is 10 (+FEAT) horizontal sums and
-// atomics, and the splat record is a uniform (broadcast) load. Measured (bench --suite
-// raster): 11–18× the subgroup kernel; PX = 8 (4 coroutines) was 1.4–1.7× slower than PX = 32.
-// On a GPU the 8-invocation workgroup leaves most of a warp idle: the host keeps the subgroup
-// kernel there. Results differ from it only in the order of the float sums.
+// The two shapes of blend_fwd_tile.glsl (read its header), both for CPU devices:
+// - whole tile (PX = 32, blend_bwd_tile_f*.comp): one lavapipe coroutine per tile; the
+//   subgroup kernel pays, per splat and tile, one subgroupAdd and one float atomic per
+//   component for each of its 32 coroutines and stages splats behind barriers: 11–18× slower
+//   on the issue-14 scenes.
+// - bands (PX = 8 and STEP_OVER, blend_bwd_band_f*.comp): 4 rows per subgroup at lavapipe's 8
+//   lanes, stepping over the splats that miss the band's rows; a splat that reaches several
+//   bands is folded and added once per band.
+// Results differ between shapes only in the order of the float sums. The fold is correct for
+// any grouping of the invocations: lanes fold with the lanes of their subgroup that hold the
+// same splat (a waterfall over distinct ids, one round where the subgroup is one band).
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_ballot : require
 #extension GL_KHR_shader_subgroup_vote : require
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
@@ -25,9 +29,6 @@
 #include "raster.glsl"
 
 #define WG (TILE * TILE / PX)
-#if (TILE % WG) != 0
-#error "a pixel's row q / TILE must be uniform: WG must divide TILE"
-#endif
 layout(local_size_x = WG) in;
 
 #include "blend_bwd_io.glsl"
@@ -38,13 +39,18 @@ void add(uint idx, float v) {
 }
 
 void main() {
-    uint t = gl_LocalInvocationID.x;
+    uint t = gl_LocalInvocationIndex;
     uint tile = gl_WorkGroupID.y * pc.tiles_x + gl_WorkGroupID.x;
     uvec2 range = ranges[tile];
     // The other kernel of the pass draws this tile (BlendParams.list_min/list_max).
     uint listed = range.y - range.x;
     if (listed < pc.list_min || listed > pc.list_max) return;
     uvec2 origin = gl_WorkGroupID.xy * TILE;
+    uint S = min(gl_SubgroupSize, uint(WG));
+    uint band = t / S, lane = t % S;
+    uint first = band * S * PX;
+    float row_lo = float(origin.y + first / TILE) + 0.5;
+    float row_hi = float(origin.y + (first + S * PX - 1u) / TILE) + 0.5;
 
     // Per pixel: transmittance, last contributor, upstream gradients, "behind" terms.
     float T[PX], R_a[PX], R_d[PX], g_depth[PX];
@@ -56,7 +62,7 @@ void main() {
 #endif
     uint max_last = 0;
     for (int i = 0; i < PX; ++i) {
-        uint q = t + WG * uint(i);
+        uint q = first + lane + S * uint(i);
         uvec2 pix = origin + uvec2(q % TILE, q / TILE);
         bool inside = pix.x < pc.width && pix.y < pc.height;
         uint p = inside ? pix.y * pc.width + pix.x : 0u;
@@ -75,18 +81,36 @@ void main() {
 #endif
         max_last = max(max_last, last[i]);
     }
-    // Nothing past the subgroup's furthest last contributor matters.
+    // Nothing past the band's furthest last contributor matters (the subgroup's, when the
+    // subgroup is wider than a band).
     uint end = range.x + subgroupMax(max_last);
 
     for (uint j = end; j > range.x;) {
+#ifdef STEP_OVER
+        // Step over the splats that reach no row of the band.
+        uint gid = 0u;
+        vec4 a = vec4(0.0), c4 = vec4(0.0);
+        bool found = false;
+        while (j > range.x) {
+            --j;
+            gid = ids[j];
+            a = splats[SPLAT_STRIDE * gid];
+            c4 = splats[SPLAT_STRIDE * gid + 2];
+            if (a.y + c4.w >= row_lo && a.y - c4.w <= row_hi) {
+                found = true;
+                break;
+            }
+        }
+        if (!found) break;
+#else
         --j;
-        uint rel = j - range.x; // 0-based position in the tile's list
-        uint gid = ids[j];      // uniform: broadcast loads below
+        uint gid = ids[j]; // uniform: broadcast loads below
         vec4 a = splats[SPLAT_STRIDE * gid];
-        vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
         vec4 c4 = splats[SPLAT_STRIDE * gid + 2];
+#endif
+        uint rel = j - range.x; // 0-based position in the tile's list
+        vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
         vec3 col = c4.rgb;
-        float reach = c4.w; // |dy| past which α < 1/255 (alpha_extent)
 #if FEAT > 0
         float f[FEAT];
         for (int c = 0; c < FEAT; ++c) f[c] = feat[gid * FEAT + c];
@@ -98,9 +122,7 @@ void main() {
         float g_op = 0.0, g_z = 0.0, g_op_f = 0.0;
         bool any_live = false;
         for (int i = 0; i < PX; ++i) {
-            // Rows the splat cannot reach hold no α ≥ 1/255: skipped whole (as the forward).
-            if (abs(a.y - (float(origin.y + (WG * uint(i)) / TILE) + 0.5)) > reach) continue;
-            uint q = t + WG * uint(i);
+            uint q = first + lane + S * uint(i);
             vec2 d = a.xy - (vec2(origin + uvec2(q % TILE, q / TILE)) + 0.5);
             float sigma = splat_sigma(con, d);
             float g = a.w * exp(-sigma);
@@ -138,27 +160,32 @@ void main() {
             }
         }
         if (!subgroupAny(any_live)) continue;
-        uint base = gid * G2D_STRIDE;
-        add(base + 0, g_mean.x);
-        add(base + 1, g_mean.y);
-        add(base + 2, g_con.x);
-        add(base + 3, g_con.y);
-        add(base + 4, g_con.z);
-        add(base + 5, g_op);
-        add(base + 6, g_col.r);
-        add(base + 7, g_col.g);
-        add(base + 8, g_col.b);
-        add(base + 9, g_z);
-        if (pc.abs_grad != 0u) { // uniform: the densification's absolute statistic
-            add(base + 10, g_abs.x);
-            add(base + 11, g_abs.y);
-        }
-        if (pc.feat_op != 0u) add(base + 12, g_op_f); // uniform
+        // Fold over the lanes holding this splat: one round where the subgroup is one band.
+        for (;;) {
+            if (gid != subgroupBroadcastFirst(gid)) continue;
+            uint base = gid * G2D_STRIDE;
+            add(base + 0, g_mean.x);
+            add(base + 1, g_mean.y);
+            add(base + 2, g_con.x);
+            add(base + 3, g_con.y);
+            add(base + 4, g_con.z);
+            add(base + 5, g_op);
+            add(base + 6, g_col.r);
+            add(base + 7, g_col.g);
+            add(base + 8, g_col.b);
+            add(base + 9, g_z);
+            if (pc.abs_grad != 0u) { // uniform: the densification's absolute statistic
+                add(base + 10, g_abs.x);
+                add(base + 11, g_abs.y);
+            }
+            if (pc.feat_op != 0u) add(base + 12, g_op_f); // uniform
 #if FEAT > 0
-        for (int c = 0; c < FEAT; ++c) {
-            float s = subgroupAdd(gfe[c]);
-            if (subgroupElect() && s != 0.0) atomicAdd(grad_feat[gid * FEAT + c], s);
-        }
+            for (int c = 0; c < FEAT; ++c) {
+                float s = subgroupAdd(gfe[c]);
+                if (subgroupElect() && s != 0.0) atomicAdd(grad_feat[gid * FEAT + c], s);
+            }
 #endif
+            break;
+        }
     }
 }

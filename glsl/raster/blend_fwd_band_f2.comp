@@ -1,6 +1,7 @@
 #version 460
-// Blend forward, one subgroup per band of the tile (body in blend_fwd_band.glsl), 2 extra
-// feature channels; 8 pixels per invocation, 32 invocations per tile.
+// Blend forward in bands (body in blend_fwd_tile.glsl), 2 extra feature channels; 8 pixels
+// per invocation, 32 invocations per tile, splats that miss a band's rows stepped over.
 #define FEAT 2
 #define PX 8
-#include "blend_fwd_band.glsl"
+#define STEP_OVER
+#include "blend_fwd_tile.glsl"

@@ -1,43 +1,57 @@
 // Blend forward, pixels in registers: the same maths as blend_fwd.glsl (read its header), one
-// workgroup per 16×16 tile with TILE²/PX invocations, each owning PX pixels of the tile (pixel
-// q = invocation + WG·i) with their blend state in registers. Each subgroup walks the tile's
-// depth-sorted splats front to back on its own (no barrier, no shared memory): the splat
-// record is a uniform (broadcast) load, then the PX pixels are blended in order, exactly as
-// blend_fwd.glsl blends its one pixel, so per pixel the float operations and their order are
-// the same. The walk stops once every pixel of the subgroup is saturated (a uniform break), and
-// skips the pixel rows a splat cannot reach (its record's `reach`, from alpha_extent: α < 1/255
-// there, so the skip changes nothing but the time).
+// workgroup per 16×16 tile with TILE²/PX invocations, each owning PX pixels of the tile with
+// their blend state in registers. Each subgroup owns a band of S·PX consecutive pixels of the
+// tile (S = its lanes, at most the workgroup) and walks the tile's depth-sorted splats front to
+// back on its own (no barrier, no shared memory): the splat record is a uniform load, then its
+// PX pixels are blended in order, exactly as blend_fwd.glsl blends its one pixel, so per pixel
+// the float operations and their order are the same. The walk stops once every pixel of the
+// subgroup is saturated (a uniform break).
 //
-// Why on lavapipe: a workgroup is ceil(WG/8) coroutines of 8 SIMD lanes, and every barrier()
-// suspends and resumes each of them; shared-memory accesses are per-lane scalar loops. The
-// shared-memory kernel pays 4 barriers and 256 per-lane staging loads per batch of 256 splats
-// and reads every splat from shared memory per lane; with PX = 32 the workgroup is one
-// coroutine and a splat is one broadcast load. On a GPU the 8-invocation workgroup leaves most
-// of a warp idle: the host keeps the shared-memory kernel there.
+// Two shapes, both for CPU devices (on a GPU a few invocations per tile leave most of a warp
+// idle: the host keeps the shared-memory kernel there):
+// - whole tile (PX = 32, blend_fwd_tile_f*.comp): 8 invocations, one lavapipe coroutine of 8
+//   lanes per tile; the shared-memory kernel pays 4 barriers and 256 per-lane staging loads
+//   per batch of 256 splats, this one a broadcast load per splat.
+// - bands (PX = 8 and STEP_OVER, blend_fwd_band_f*.comp): 32 invocations, 4 rows per subgroup
+//   at lavapipe's 8 lanes, and a short loop that steps over the splats whose reach (the
+//   record's alpha_extent y) misses the band's rows. On lavapipe an `if` is an execution mask,
+//   not a branch, so the whole-tile shape pays all PX evaluations of exp for every splat of
+//   the list however few rows it reaches; a loop's exit is a real branch, so a splat that
+//   misses the band costs one loop iteration. A skipped splat has α < 1/255 at every row of
+//   the band, which the blend skips anyway: the outputs are the whole-tile shape's bits. Each
+//   splat costs up to two loop iterations of lavapipe's 65 535 per invocation, so the host
+//   gives the bands the lists of at most BAND_LIST_MAX splats (BlendParams.list_min/max) and
+//   the whole-tile shape the rest.
+// Subgroup layout is a matter of speed only: every subgroup operation below is correct for any
+// grouping of the invocations (the band is gl_LocalInvocationIndex / S).
 #extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
 #include "common.glsl"
 #include "params.glsl"
 #include "raster.glsl"
 
 #define WG (TILE * TILE / PX)
-#if (TILE % WG) != 0
-#error "a pixel's row q / TILE must be uniform: WG must divide TILE"
-#endif
 layout(local_size_x = WG) in;
 
 #include "blend_fwd_io.glsl"
 
 void main() {
-    uint t = gl_LocalInvocationID.x;
+    uint t = gl_LocalInvocationIndex;
     uint tile = gl_WorkGroupID.y * pc.tiles_x + gl_WorkGroupID.x;
     uvec2 range = ranges[tile];
     // The other kernel of the pass draws this tile (BlendParams.list_min/list_max).
     uint listed = range.y - range.x;
     if (listed < pc.list_min || listed > pc.list_max) return;
     uvec2 origin = gl_WorkGroupID.xy * TILE;
+    // Lanes per band: the subgroup's, at most the workgroup (a power of two dividing WG).
+    uint S = min(gl_SubgroupSize, uint(WG));
+    uint band = t / S, lane = t % S;
+    uint first = band * S * PX; // the band's first pixel (row-major in the tile)
+    // Pixel-centre rows of the band, for the step-over test.
+    float row_lo = float(origin.y + first / TILE) + 0.5;
+    float row_hi = float(origin.y + (first + S * PX - 1u) / TILE) + 0.5;
 
-    // Per pixel: transmittance, colour, depth, features, last contributor (1-based, 0: none).
     float T[PX], D[PX];
     vec3 C[PX];
     uint last[PX];
@@ -46,7 +60,7 @@ void main() {
 #endif
     uint live = 0u; // bit i: pixel i is inside the image and not yet saturated
     for (int i = 0; i < PX; ++i) {
-        uint q = t + WG * uint(i);
+        uint q = first + lane + S * uint(i);
         uvec2 pix = origin + uvec2(q % TILE, q / TILE);
         if (pix.x < pc.width && pix.y < pc.height) live |= 1u << uint(i);
         T[i] = 1.0;
@@ -61,23 +75,36 @@ void main() {
     uint j = range.x;
     for (; j < range.y; ++j) {
         if (subgroupAll(live == 0u)) break;
+#ifdef STEP_OVER
+        // Step over the splats that reach no row of the band (α < 1/255 there).
+        uint gid = 0u;
+        vec4 a = vec4(0.0), c4 = vec4(0.0);
+        bool found = false;
+        for (; j < range.y; ++j) {
+            gid = ids[j];
+            a = splats[SPLAT_STRIDE * gid];
+            c4 = splats[SPLAT_STRIDE * gid + 2];
+            if (a.y + c4.w >= row_lo && a.y - c4.w <= row_hi) {
+                found = true;
+                break;
+            }
+        }
+        if (!found) break;
+#else
         uint gid = ids[j]; // uniform: broadcast loads below
         vec4 a = splats[SPLAT_STRIDE * gid];
-        vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
         vec4 c4 = splats[SPLAT_STRIDE * gid + 2];
+#endif
+        vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
         vec3 col = c4.rgb;
-        float reach = c4.w; // |dy| past which α < 1/255 (alpha_extent)
 #if FEAT > 0
         float f[FEAT];
         for (int c = 0; c < FEAT; ++c) f[c] = feat[gid * FEAT + c];
 #endif
         uint seen = j - range.x + 1u;
         for (int i = 0; i < PX; ++i) {
-            // A row the splat cannot reach is skipped whole (uniform: q / TILE = WG·i / TILE);
-            // dy is the d.y below, so a skipped pixel is one with α < 1/255.
-            if (abs(a.y - (float(origin.y + (WG * uint(i)) / TILE) + 0.5)) > reach) continue;
             if ((live & (1u << uint(i))) == 0u) continue;
-            uint q = t + WG * uint(i);
+            uint q = first + lane + S * uint(i);
             vec2 centre = vec2(origin + uvec2(q % TILE, q / TILE)) + 0.5;
             vec2 d = a.xy - centre;
             float sigma = splat_sigma(con, d);
@@ -105,7 +132,7 @@ void main() {
     if (j < range.y && live != 0u) atomicOr(overflow_word, OVERFLOW_WALK_CUT);
 
     for (int i = 0; i < PX; ++i) {
-        uint q = t + WG * uint(i);
+        uint q = first + lane + S * uint(i);
         uvec2 pix = origin + uvec2(q % TILE, q / TILE);
         if (pix.x >= pc.width || pix.y >= pc.height) continue;
         uint p = pix.y * pc.width + pix.x;
