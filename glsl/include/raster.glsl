@@ -17,7 +17,7 @@
 // Per-Gaussian splat record written by `project`, read by blend (3 × vec4):
 //   [0] = (mean2d.x, mean2d.y, depth, opacity)   [1] = (conic a, b, c, radius)
 //   [2] = (r, g, b, reach): |dy| past which α < 1/255 (alpha_extent's y, with
-//         ProjectParams.splat_extent; else EXTENT_NONE): the CPU blends skip those pixel rows
+//         ProjectParams.splat_extent; else EXTENT_NONE): the band blends skip bands beyond it
 #define SPLAT_STRIDE 3
 
 // Per-Gaussian 2D gradient record accumulated by blend_bwd (stride 13 floats):

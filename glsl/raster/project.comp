@@ -6,8 +6,8 @@
 // culls before any projection work. With pc.splat_extent the rectangle is opacity_rect's:
 // only the tiles where the blend can reach α ≥ 1/255 (none below opacity 1/255), so faint
 // Gaussians are binned to fewer tiles and every image and gradient stays the same; and the
-// splat record carries alpha_extent's y, with which the CPU blends skip the rows of a tile
-// the splat cannot reach.
+// splat record carries alpha_extent's y, with which the band blends step over the bands of a
+// tile the splat cannot reach.
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 #include "params.glsl"

@@ -386,7 +386,7 @@ pub enum BlendBwdVariant {
     TileAccum,
     /// 32 invocations per tile, 8 pixels each, one subgroup per band of rows stepping over the
     /// splats that miss its rows; per splat, the terms are summed over the band
-    /// (`blend_bwd_band.glsl`). CPU-shaped.
+    /// (`blend_bwd_band_f*.comp`: `blend_bwd_tile.glsl` with `STEP_OVER`). CPU-shaped.
     TileBands,
 }
 
@@ -434,7 +434,8 @@ pub enum BlendFwdVariant {
     /// barriers, no shared memory (`blend_fwd_tile.glsl`). CPU-shaped.
     TileRegs,
     /// 32 invocations per tile, 8 pixels each in registers, one subgroup per band of rows
-    /// stepping over the splats that miss its rows (`blend_fwd_band.glsl`). CPU-shaped.
+    /// stepping over the splats that miss its rows (`blend_fwd_tile.glsl` with `STEP_OVER`).
+    /// CPU-shaped.
     TileBands,
 }
 
@@ -466,17 +467,17 @@ impl DeviceShape for BlendFwdVariant {
     }
 }
 
-/// Which tiles `project` bins a splat to, and which pixel rows of a tile the CPU-shaped blends
-/// (`TileRegs`, `TileAccum`) evaluate it at. Both give the same images and gradients (the blend
+/// Which tiles `project` bins a splat to, and which bands of a tile the band blends
+/// (`TileBands`) evaluate it at. Both give the same images and gradients (the blend
 /// draws no pixel outside the opacity-aware box; tests/raster_extent.rs compares them bit for
 /// bit); the box gives fewer tile intersections, so less binning, sorting and blending.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum SplatExtent {
-    /// The square of the 3σ radius around the mean (3DGS); every row of a tile.
+    /// The square of the 3σ radius around the mean (3DGS); every band of a tile.
     Radius,
     /// The bounding box of the ellipse where α = opacity·exp(−σ) reaches 1/255, capped by the
     /// 3σ square; none for opacity < 1/255 (`opacity_rect` in glsl/include/raster.glsl). The
-    /// CPU blends skip the rows of a tile outside the box (the splat record's `reach`).
+    /// band blends step over a splat whose box (the splat record's `reach`) misses their rows.
     OpacityBox,
 }
 
