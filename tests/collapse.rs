@@ -87,9 +87,17 @@ fn a_collapse_is_reported_and_rollback_recovers_from_it() {
     let to = r.rolled_back_to.expect("rolled back");
     assert!(to < r.iteration, "{r:?}");
     assert_eq!(r.deform_lr_scale, Some(0.5));
-    // Each further rollback halves again.
+    // Each further rollback halves again. A stop (the fall came back where it was after the
+    // halvings: `rollback_stops_when_halving_the_rate_leaves_the_fall_as_it_was`) is the last
+    // event and keeps the rate it found.
     for (k, e) in rolled.iter().enumerate() {
-        assert_eq!(e.deform_lr_scale, Some(0.5f64.powi(k as i32 + 1)), "{e:?}");
+        if e.rollback_stopped {
+            assert_eq!(k + 1, rolled.len(), "a stop ends the rollbacks: {rolled:?}");
+            assert!(k > 0 && e.rolled_back_to.is_none(), "{e:?}");
+            assert_eq!(e.deform_lr_scale, rolled[k - 1].deform_lr_scale, "{e:?}");
+        } else {
+            assert_eq!(e.deform_lr_scale, Some(0.5f64.powi(k as i32 + 1)), "{e:?}");
+        }
     }
     // The restored state trains at the level before the fall, above the collapsed one.
     assert!(
