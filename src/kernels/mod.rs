@@ -184,7 +184,9 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             alpha_max,
             num_gaussians,
             abs_grad,
-            feat_op
+            feat_op,
+            list_min,
+            list_max
         ),
         layout!(
             mlp::MlpEncodeParams,
