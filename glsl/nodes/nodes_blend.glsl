@@ -20,30 +20,37 @@ Blend blend_of(uint i, vec3 mu) {
     b.count = 0;
     float amax = -1.0 / 0.0;
     float a[NODES_KMAX];
-    for (uint s = 0; s < pc.k; ++s) {
-        uint j = knn[i * pc.k + s];
-        if (j >= pc.m) break;
+    // Every loop over the slots (here and in the kernels) runs to the constant NODES_KMAX with
+    // the unused slots masked off by `s < b.count` (never multiplied by a zero weight: their
+    // stand-in node 0 may hold anything): lavapipe keeps an array indexed by a run-time counter
+    // in scratch memory, where each access is a loop over the lanes; unrolled, the slots live
+    // in registers.
+    for (uint s = 0; s < NODES_KMAX; ++s) {
+        uint j = s < pc.k ? knn[i * pc.k + s] : NO_NODE;
+        // The valid slots are a prefix: the first NO_NODE ends them.
+        bool on = s == b.count && j < pc.m;
+        j = on ? j : 0u;
         b.node[s] = j;
         float rho = nodes[3 * pc.m + j];
         b.clamped[s] = !(rho >= RHO_MIN && rho <= RHO_MAX);
         b.inv[s] = exp(-2.0 * clamp(rho, RHO_MIN, RHO_MAX));
         b.v[s] = mu - vec3(nodes[3 * j], nodes[3 * j + 1], nodes[3 * j + 2]);
         a[s] = -0.5 * dot(b.v[s], b.v[s]) * b.inv[s];
-        amax = max(amax, a[s]);
+        if (on) amax = max(amax, a[s]);
         vec4 r = vec4(1.0 + node_out[10 * j + 3], node_out[10 * j + 4], node_out[10 * j + 5],
                       node_out[10 * j + 6]);
         b.rn[s] = quat_normalize(r, b.rlen[s]);
-        b.count = s + 1;
+        if (on) b.count = s + 1;
     }
     float sum = 0.0;
-    for (uint s = 0; s < b.count; ++s) {
-        b.w[s] = exp(a[s] - amax);
+    for (uint s = 0; s < NODES_KMAX; ++s) {
+        b.w[s] = s < b.count ? exp(a[s] - amax) : 0.0;
         sum += b.w[s];
     }
     b.Q = vec4(0.0);
-    for (uint s = 0; s < b.count; ++s) {
-        b.w[s] /= sum;
-        b.Q += b.w[s] * b.rn[s];
+    for (uint s = 0; s < NODES_KMAX; ++s) {
+        b.w[s] = s < b.count ? b.w[s] / sum : 0.0;
+        if (s < b.count) b.Q += b.w[s] * b.rn[s];
     }
     return b;
 }

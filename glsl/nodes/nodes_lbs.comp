@@ -31,7 +31,8 @@ void main() {
     vec3 dx = vec3(0.0), ds = vec3(0.0);
     vec4 dr = vec4(0.0);
     if (b.count > 0) {
-        for (uint s = 0; s < b.count; ++s) {
+        for (uint s = 0; s < NODES_KMAX; ++s) {
+            if (s >= b.count) continue; // masked (nodes_blend.glsl)
             uint j = b.node[s];
             dx += b.w[s] * (quat_to_mat(b.rn[s]) * b.v[s] - b.v[s] + node_t(j));
             ds += b.w[s] * node_ds(j);

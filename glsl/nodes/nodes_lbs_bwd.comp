@@ -48,14 +48,17 @@ void main() {
     float gw[NODES_KMAX];
     float gbar = 0.0;
     vec3 g_mu = vec3(0.0);
-    for (uint s = 0; s < b.count; ++s) {
+    for (uint s = 0; s < NODES_KMAX; ++s) {
+        gw[s] = 0.0;
+        if (s >= b.count) continue; // masked (nodes_blend.glsl)
         uint j = b.node[s];
         mat3 R = quat_to_mat(b.rn[s]);
         vec3 e = R * b.v[s] - b.v[s] + node_t(j);
         gw[s] = dot(gx, e) + dot(gs, node_ds(j)) + dot(g_Q, b.rn[s]);
         gbar += b.w[s] * gw[s];
     }
-    for (uint s = 0; s < b.count; ++s) {
+    for (uint s = 0; s < NODES_KMAX; ++s) {
+        if (s >= b.count) continue; // masked (nodes_blend.glsl)
         uint j = b.node[s];
         float w = b.w[s];
         mat3 R = quat_to_mat(b.rn[s]);
