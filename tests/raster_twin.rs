@@ -14,7 +14,8 @@
 mod raster_common;
 
 use dispflow_vk::kernels::raster::{
-    BlendBwdVariant, OutputGrads, RasterSize, Rasterizer, RenderOpts, SplatInputs, G2D_STRIDE,
+    BlendBwdVariant, BlendFwdVariant, OutputGrads, RasterSize, Rasterizer, RenderOpts, SplatInputs,
+    BAND_COVER_MAX, BAND_LIST_MAX, G2D_STRIDE,
 };
 use dispflow_vk::reference::raster as twin;
 use dispflow_vk::testing::{self, assert_close, Noise, Tol};
@@ -487,4 +488,104 @@ fn feature_weights_detached_from_the_opacity_factors() {
         }
     }
     rast.set_blend_bwd_variant(default);
+}
+
+/// The band blends hand a tile to the whole-tile kernels when its splats span most of its
+/// bands (`blend_pick.glsl`, twin `bin::band_tile`). Whatever the threshold, the image is the
+/// whole-tile kernel's bit for bit (a tile drawn by neither kernel keeps the noise the buffers
+/// were filled with; one drawn by both doubles its gradients) and every gradient matches the
+/// twin; at a threshold of two bands per splat this scene's tiles go both ways.
+#[test]
+fn bands_or_whole_tiles_picked_per_tile() {
+    let gpu = testing::gpu();
+    let mut rast = Rasterizer::new(&gpu).unwrap();
+    rast.set_blend_fwd_variant(BlendFwdVariant::TileBands);
+    rast.set_blend_bwd_variant(BlendBwdVariant::TileBands);
+    let (seed, k) = (41u64, 3u32);
+    // Large splats on the left, a few hundred small ones on the right.
+    let mut scene = random_scene(seed, 60, 1, k);
+    let mut r = Noise::new(seed + 1);
+    let mut u = move || (r.next_u32() as f32 + 0.5) / 4_294_967_296.0;
+    for _ in 0..300 {
+        let z = 2.0 + 2.0 * u();
+        let (x, y) = ((0.05 + 0.45 * u()) * z, (u() - 0.5) * 0.7 * z);
+        let s = 0.004 + 0.008 * u();
+        let q = [u() - 0.5, u() - 0.5, u() - 0.5, u() - 0.5];
+        scene.push(
+            [x, y, z],
+            [s, 1.5 * s, s],
+            q,
+            3.0 * u() - 1.0,
+            [u(), u(), u()],
+        );
+    }
+    let n = scene.len();
+    let cam = camera(80, 56);
+    let opts = RenderOpts {
+        background: [0.1, 0.2, 0.3],
+        alpha_max: 0.99,
+        abs_grad: true,
+        detach_feature_weights: false,
+    };
+    let up = Uploaded::new(&gpu, &scene);
+    let px = (cam.width * cam.height) as usize;
+    let u = upstream(seed + 100, px, k as usize);
+    let g = scene.twin();
+    let proj = twin::project(&cam, &g);
+    let bp = twin::BlendParams {
+        width: cam.width,
+        height: cam.height,
+        alpha_max: opts.alpha_max,
+        background: opts.background,
+        feature_dims: k,
+    };
+    let fwd = twin::blend_fwd(&bp, &proj, &scene.features);
+    let bg = twin_blend_bwd(&bp, &proj, &scene.features, &fwd, &u);
+    let pg = twin::project_bwd(&cam, &g, &proj, &bg);
+
+    let mut images = Vec::new();
+    // 16 (two bands per splat) splits this scene's tiles; the default, 32, keeps them in bands.
+    assert_eq!(BAND_COVER_MAX, 32);
+    for cover in [0, 16, 32] {
+        rast.set_band_cover_max(cover);
+        let (b, out) = render(&gpu, &rast, &cam, &up, &opts);
+        if cover == 16 {
+            // Which way each tile goes, from this render's lists and splat records.
+            let ranges = b.tile_ranges(&gpu).unwrap();
+            let ids = b.intersection_ids(&gpu).unwrap();
+            let splats: Vec<[f32; 4]> = gpu
+                .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
+                .unwrap();
+            let tiles_x = cam.width.div_ceil(16) as usize;
+            let (mut bands, mut whole) = (0, 0);
+            for (t, r) in ranges.iter().enumerate().filter(|(_, r)| r[1] > r[0]) {
+                let list = &ids[r[0] as usize..r[1] as usize];
+                let y = (t / tiles_x) as u32;
+                match twin::bin::band_tile(y, list, &splats, BAND_LIST_MAX, cover) {
+                    true => bands += 1,
+                    false => whole += 1,
+                }
+            }
+            assert!(
+                bands > 0 && whole > 0,
+                "the pick at 16 sends {bands} tiles to the bands and {whole} whole: the scene \
+                 does not exercise it"
+            );
+        }
+        let grads = backward(&gpu, &rast, &b, &cam, &up, &opts, &u);
+        check_grads(&format!("band cover {cover}"), n, &grads, &bg, &pg, true);
+        images.push((cover, out));
+    }
+    let (_, first) = &images[0];
+    for (cover, out) in &images[1..] {
+        let same = out.rgba == first.rgba
+            && out.depth == first.depth
+            && out.final_t == first.final_t
+            && out.n_contrib == first.n_contrib
+            && out.features == first.features;
+        assert!(
+            same,
+            "band cover {cover}: the image differs from the whole tiles'"
+        );
+    }
 }

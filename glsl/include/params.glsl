@@ -226,8 +226,11 @@ struct BlendParams {
     uint num_gaussians;
     uint abs_grad;    // blend_bwd: also accumulate Σ|∂L/∂mean2d| per pixel into slots 10-11
     uint feat_op;     // blend_bwd: also accumulate the feature channels' share of slot 5 into slot 12
-    uint list_min;    // CPU blends: only tiles whose list holds list_min..=list_max splats (the
-    uint list_max;    // band kernels take the short lists, the whole-tile ones the rest)
+    uint pick;        // CPU blends, which tiles a kernel draws: 0 all, 1 the bands', 2 the rest
+    uint band_list_max;  // the longest list the band kernels walk (BAND_LIST_MAX)
+    uint band_cover_max; // the bands take a tile when its sampled splats cover at most this
+                         // many eighths of a band each, on average (blend_pick.glsl)
+    uint pad;
 };
 
 // src/kernels/loss.rs — photometric loss 0.8·L1 + 0.2·(1 − SSIM) and its gradient.

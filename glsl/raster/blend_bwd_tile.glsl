@@ -14,7 +14,8 @@
 //   on the issue-14 scenes.
 // - bands (PX = 8 and STEP_OVER, blend_bwd_band_f*.comp): 4 rows per subgroup at lavapipe's 8
 //   lanes, stepping over the splats that miss the band's rows; a splat that reaches several
-//   bands is folded and added once per band.
+//   bands is folded and added once per band (so a tile of large splats goes whole:
+//   blend_pick.glsl).
 // Results differ between shapes only in the order of the float sums. The fold is correct for
 // any grouping of the invocations: lanes fold with the lanes of their subgroup that hold the
 // same splat (a waterfall over distinct ids, one round where the subgroup is one band).
@@ -32,6 +33,7 @@
 layout(local_size_x = WG) in;
 
 #include "blend_bwd_io.glsl"
+#include "blend_pick.glsl"
 
 void add(uint idx, float v) {
     float s = subgroupAdd(v);
@@ -42,9 +44,8 @@ void main() {
     uint t = gl_LocalInvocationIndex;
     uint tile = gl_WorkGroupID.y * pc.tiles_x + gl_WorkGroupID.x;
     uvec2 range = ranges[tile];
-    // The other kernel of the pass draws this tile (BlendParams.list_min/list_max).
-    uint listed = range.y - range.x;
-    if (listed < pc.list_min || listed > pc.list_max) return;
+    // The other kernel of the pass draws this tile (BlendParams.pick).
+    if (!drawn_here(gl_WorkGroupID.y, range)) return;
     uvec2 origin = gl_WorkGroupID.xy * TILE;
     uint S = min(gl_SubgroupSize, uint(WG));
     uint band = t / S, lane = t % S;

@@ -19,9 +19,10 @@
 //   the list however few rows it reaches; a loop's exit is a real branch, so a splat that
 //   misses the band costs one loop iteration. A skipped splat has α < 1/255 at every row of
 //   the band, which the blend skips anyway: the outputs are the whole-tile shape's bits. Each
-//   splat costs up to two loop iterations of lavapipe's 65 535 per invocation, so the host
-//   gives the bands the lists of at most BAND_LIST_MAX splats (BlendParams.list_min/max) and
-//   the whole-tile shape the rest.
+//   splat costs up to two loop iterations of lavapipe's 65 535 per invocation.
+// A pass on a CPU device dispatches both shapes, and each draws the tiles blend_pick.glsl gives
+// it (BlendParams.pick): the whole tile takes the lists longer than BAND_LIST_MAX (the loop
+// budget) and those whose splats mostly span every band (there four walks cost more than one).
 // Subgroup layout is a matter of speed only: every subgroup operation below is correct for any
 // grouping of the invocations (the band is gl_LocalInvocationIndex / S).
 #extension GL_GOOGLE_include_directive : require
@@ -35,14 +36,14 @@
 layout(local_size_x = WG) in;
 
 #include "blend_fwd_io.glsl"
+#include "blend_pick.glsl"
 
 void main() {
     uint t = gl_LocalInvocationIndex;
     uint tile = gl_WorkGroupID.y * pc.tiles_x + gl_WorkGroupID.x;
     uvec2 range = ranges[tile];
-    // The other kernel of the pass draws this tile (BlendParams.list_min/list_max).
-    uint listed = range.y - range.x;
-    if (listed < pc.list_min || listed > pc.list_max) return;
+    // The other kernel of the pass draws this tile (BlendParams.pick).
+    if (!drawn_here(gl_WorkGroupID.y, range)) return;
     uvec2 origin = gl_WorkGroupID.xy * TILE;
     // Lanes per band: the subgroup's, at most the workgroup (a power of two dividing WG).
     uint S = min(gl_SubgroupSize, uint(WG));

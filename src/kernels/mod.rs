@@ -185,8 +185,10 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             num_gaussians,
             abs_grad,
             feat_op,
-            list_min,
-            list_max
+            pick,
+            band_list_max,
+            band_cover_max,
+            pad
         ),
         layout!(
             mlp::MlpEncodeParams,

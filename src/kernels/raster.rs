@@ -137,10 +137,15 @@ pub struct BlendParams {
     pub abs_grad: u32,
     /// 1: the backward also accumulates the feature channels' share of slot 5 into slot 12.
     pub feat_op: u32,
-    /// The CPU-shaped blends draw only the tiles whose list holds `list_min..=list_max`
-    /// splats ([`BAND_LIST_MAX`]: the band kernels take the short lists).
-    pub list_min: u32,
-    pub list_max: u32,
+    /// Which tiles a CPU-shaped blend kernel draws (`blend_pick.glsl`): 0 every tile, 1 those
+    /// the band kernel takes, 2 the others (the whole-tile kernel of the same pass).
+    pub pick: u32,
+    /// The longest list the band kernels walk ([`BAND_LIST_MAX`]).
+    pub band_list_max: u32,
+    /// The bands take a tile when its sampled splats reach at most this many eighths of a
+    /// 4-row band each on average ([`BAND_COVER_MAX`]; 32: every short list).
+    pub band_cover_max: u32,
+    pub pad: u32,
 }
 
 /// The longest tile list the band blends walk: each splat of a list costs them up to two loop
@@ -148,6 +153,23 @@ pub struct BlendParams {
 /// after 65 535 iterations in all; a longer list goes to the whole-tile kernel of the same
 /// pass (`blend_*_tile.glsl`, one iteration per splat), dispatched after it.
 pub const BAND_LIST_MAX: u32 = 32_000;
+
+/// The default of `BlendParams::band_cover_max`: 32, every list of at most [`BAND_LIST_MAX`]
+/// splats stays in bands. A lower value sends the tiles whose splats reach more than that many
+/// eighths of the tile's four bands each, on average, to the whole-tile kernel (there the bands
+/// walk the list four times and, backward, fold most splats four times). Measured on lavapipe
+/// (docs/measurements.md, "Bands or whole tiles, per tile"): 16 wins back the whole tiles'
+/// speed on the initial points but loses 10–20 % on trained models, whose bands stop early
+/// where their own pixels saturate, which the cover does not see; so the pick is a knob,
+/// `DISPFLOW_BAND_COVER` (0–32).
+pub const BAND_COVER_MAX: u32 = 32;
+
+fn band_cover_max() -> u32 {
+    std::env::var("DISPFLOW_BAND_COVER")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .map_or(BAND_COVER_MAX, |v: u32| v.min(32))
+}
 
 /// Blend options.
 #[derive(Clone, Copy, Debug)]
@@ -401,7 +423,8 @@ impl BlendBwdVariant {
 /// The default for a device: bands on CPU devices (lavapipe: 1.6–1.8× the per-tile
 /// accumulation on the issue-14 scenes and on a trained model's step, which was itself 10–14×
 /// the subgroup kernel, `bench --suite raster`; docs/measurements.md, "Blends in bands"), with
-/// `TileAccum` drawing the tiles whose list is longer than [`BAND_LIST_MAX`]; the subgroup
+/// `TileAccum` drawing the tiles whose list is longer than [`BAND_LIST_MAX`] or whose splats
+/// span most of its bands ([`BAND_COVER_MAX`]); the subgroup
 /// kernel on GPUs, where a few invocations per tile leave most of a warp idle (the whole
 /// CPU-shaped step measured 6.8–7.9× slower on an H200, docs/gpu_h200.md).
 /// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum|tile-bands` overrides the choice (benches,
@@ -449,7 +472,8 @@ impl BlendFwdVariant {
 
 /// The default for a device: pixels in registers, in bands, on CPU devices (lavapipe, `bench
 /// --suite raster`: 1.5–1.7× `TileRegs`, which draws the tiles whose list is longer than
-/// [`BAND_LIST_MAX`]); the shared-memory kernel on GPUs, where a few invocations per tile
+/// [`BAND_LIST_MAX`] or whose splats span most of its bands, [`BAND_COVER_MAX`]); the
+/// shared-memory kernel on GPUs, where a few invocations per tile
 /// leave most of a warp idle (measured on an H200 with the backward: docs/gpu_h200.md).
 /// `DISPFLOW_BLEND_FWD=shared|tile-regs|tile-bands` overrides the choice (benches, tests).
 impl DeviceShape for BlendFwdVariant {
@@ -515,6 +539,8 @@ pub struct Rasterizer {
     project_bwd: ComputePipeline,
     splat_extent: SplatExtent,
     binning: Binning,
+    /// `BlendParams::band_cover_max`, read once.
+    band_cover_max: u32,
     depth_first: DepthFirst,
     scan: PrefixSum,
     sort: RadixSort,
@@ -594,6 +620,7 @@ impl Rasterizer {
             project_bwd: gpu.pipeline(&r::PROJECT_BWD)?,
             splat_extent: SplatExtent::for_device(&gpu.info),
             binning: Binning::for_device(&gpu.info),
+            band_cover_max: band_cover_max(),
             depth_first: DepthFirst::new(gpu)?,
             scan: PrefixSum::new(gpu)?,
             sort: RadixSort::new(gpu)?,
@@ -628,6 +655,19 @@ impl Rasterizer {
     /// Chooses the splat extent (tests and benches compare them on one device).
     pub fn set_splat_extent(&mut self, e: SplatExtent) {
         self.splat_extent = e;
+    }
+
+    /// `BlendParams::band_cover_max` of every render ([`BAND_COVER_MAX`] unless
+    /// `DISPFLOW_BAND_COVER` says otherwise).
+    pub fn band_cover_max(&self) -> u32 {
+        self.band_cover_max
+    }
+
+    /// Chooses which tiles the band blends hand to the whole-tile kernels (0: every tile goes
+    /// whole; 32: every list of at most [`BAND_LIST_MAX`] splats stays in bands). Tests and
+    /// benches compare the picks on one device.
+    pub fn set_band_cover_max(&mut self, c: u32) {
+        self.band_cover_max = c.min(32);
     }
 
     /// How `forward` bins splats to tiles.
@@ -761,7 +801,7 @@ impl Rasterizer {
         }
     }
 
-    fn blend_params(cam: &Camera, g: &SplatInputs<'_>, o: &RenderOpts) -> BlendParams {
+    fn blend_params(&self, cam: &Camera, g: &SplatInputs<'_>, o: &RenderOpts) -> BlendParams {
         let (tiles_x, tiles_y) = cam.tiles();
         BlendParams {
             background: [o.background[0], o.background[1], o.background[2], 0.0],
@@ -773,13 +813,15 @@ impl Rasterizer {
             num_gaussians: g.n,
             abs_grad: o.abs_grad as u32,
             feat_op: (o.detach_feature_weights && g.features.is_some()) as u32,
-            list_min: 0,
-            list_max: u32::MAX,
+            pick: 0,
+            band_list_max: BAND_LIST_MAX,
+            band_cover_max: self.band_cover_max,
+            pad: 0,
         }
     }
 
-    /// The dispatches of a blend variant: the variant over the tile lists it walks, and for
-    /// the band kernels the whole-tile kernel (`whole`) over the longer lists.
+    /// The dispatches of a blend variant: the variant over every tile, or the band kernel over
+    /// the tiles it takes and the whole-tile kernel (`whole`) over the rest (`blend_pick.glsl`).
     fn blend_dispatches(
         bands: bool,
         own: usize,
@@ -790,20 +832,8 @@ impl Rasterizer {
             return vec![(own, *bp)];
         }
         vec![
-            (
-                own,
-                BlendParams {
-                    list_max: BAND_LIST_MAX,
-                    ..*bp
-                },
-            ),
-            (
-                whole,
-                BlendParams {
-                    list_min: BAND_LIST_MAX + 1,
-                    ..*bp
-                },
-            ),
+            (own, BlendParams { pick: 1, ..*bp }),
+            (whole, BlendParams { pick: 2, ..*bp }),
         ]
     }
 
@@ -871,7 +901,7 @@ impl Rasterizer {
         }
         rec.set_zone(&outer);
         let out = isect_out(cam.width, cam.height);
-        let bp = Self::blend_params(cam, g, o);
+        let bp = self.blend_params(cam, g, o);
         let (tx, ty) = cam.tiles();
         let mut binds = vec![
             b.ranges.all(),
@@ -1041,7 +1071,7 @@ impl Rasterizer {
             "feature gradients given iff features are"
         );
         let out = isect_out(cam.width, cam.height);
-        let bp = Self::blend_params(cam, g, o);
+        let bp = self.blend_params(cam, g, o);
         let (tx, ty) = cam.tiles();
         rec.fill(b.grad2d.all(), 0);
         let mut binds = vec![

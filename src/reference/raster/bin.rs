@@ -173,6 +173,42 @@ fn emit(
     }
 }
 
+/// `blend_pick.glsl`'s `band_tile`: whether the band blends (rather than the whole-tile ones)
+/// draw tile row `tile_y`'s tile with list `ids` (front to back), from the splat records
+/// `splats` (`[N·3]` vec4: mean2d.y in `[3i].y`, the y reach in `[3i + 2].w`): no longer than
+/// `band_list_max`, and its `BAND_SAMPLE` evenly spaced entries reaching at most
+/// `band_cover_max`/8 of the tile's four 4-row bands each, on average. Exact: the same f32
+/// comparisons and integer sums.
+pub fn band_tile(
+    tile_y: u32,
+    ids: &[u32],
+    splats: &[[f32; 4]],
+    band_list_max: u32,
+    band_cover_max: u32,
+) -> bool {
+    const BAND_SAMPLE: u32 = 32;
+    let n = ids.len() as u32;
+    if n > band_list_max {
+        return false;
+    }
+    if band_cover_max >= 32 {
+        return true;
+    }
+    let s = n.min(BAND_SAMPLE);
+    let y0 = (tile_y * super::TILE) as f32;
+    let mut cover = 0u32;
+    for k in 0..s {
+        let gid = ids[(k * n / s) as usize] as usize;
+        let (y, reach) = (splats[3 * gid][1], splats[3 * gid + 2][3]);
+        for b in 0..4u32 {
+            let lo = y0 + (4 * b) as f32 + 0.5;
+            let hi = lo + 3.0;
+            cover += (y + reach >= lo && y - reach <= hi) as u32;
+        }
+    }
+    cover * 8 <= band_cover_max * s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

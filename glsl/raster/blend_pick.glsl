@@ -1,0 +1,33 @@
+// Which of the two CPU-shaped kernels of a blend pass draws a tile (BlendParams.pick), the
+// same answer in both: the band kernel (blend_*_tile.glsl with STEP_OVER) or the whole-tile
+// one. Bands pay one walk of the list per band and, in the backward, one fold per band that a
+// splat reaches; the whole tile pays every pixel of the tile for every splat. So a tile whose
+// splats mostly span the whole tile (the large faint splats of the initial points) goes whole,
+// one with small splats to the bands. The cover is sampled at BAND_SAMPLE evenly spaced list
+// entries, in bands of 4 rows (lavapipe's shape, whatever the device's subgroup size): a speed
+// choice only, the image is the same either way (forward bit for bit; backward up to the
+// order of float sums). Needs the bindings `ids`, `splats` and the push constants `pc`.
+#define BAND_SAMPLE 32u
+
+bool band_tile(uint tile_y, uvec2 range) {
+    uint n = range.y - range.x;
+    if (n > pc.band_list_max) return false; // lavapipe's loop budget (BAND_LIST_MAX)
+    if (pc.band_cover_max >= 32u) return true; // every short list (the default): no sample
+    uint s = min(n, BAND_SAMPLE);
+    float y0 = float(tile_y * TILE);
+    uint cover = 0u; // bands reached, summed over the sample
+    for (uint k = 0u; k < s; ++k) {
+        uint gid = ids[range.x + (k * n) / s];
+        float y = splats[SPLAT_STRIDE * gid].y;
+        float reach = splats[SPLAT_STRIDE * gid + 2].w;
+        for (uint b = 0u; b < 4u; ++b) {
+            float lo = y0 + float(4u * b) + 0.5, hi = lo + 3.0;
+            cover += (y + reach >= lo && y - reach <= hi) ? 1u : 0u;
+        }
+    }
+    return cover * 8u <= pc.band_cover_max * s; // band_cover_max: bands per splat, in eighths
+}
+
+bool drawn_here(uint tile_y, uvec2 range) {
+    return pc.pick == 0u || band_tile(tile_y, range) == (pc.pick == 1u);
+}
