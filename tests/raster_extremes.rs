@@ -272,13 +272,7 @@ fn a_tile_walk_the_device_cuts_is_an_error() {
     let lavapipe = gpu.info.name.contains("llvmpipe");
     let mut rast = Rasterizer::new(&gpu).unwrap();
     let up = Uploaded::new(&gpu, &s);
-    let bp = twin::BlendParams {
-        width: cam.width,
-        height: cam.height,
-        alpha_max: OPTS.alpha_max,
-        background: OPTS.background,
-        feature_dims: 0,
-    };
+    let bp = twin_blend_params(&cam, &OPTS, 0);
     let fwd = twin::blend_fwd(&bp, &twin::project(&cam, &s.twin()), &[]);
     let (small, _) = faint_in_one_tile(100, 16);
     let small_up = Uploaded::new(&gpu, &small);
@@ -423,13 +417,7 @@ fn twin_check(label: &str, scene: &Scene, cam: &Camera, opts: &RenderOpts, tol: 
     let k = scene.feature_dims;
     let g = scene.twin();
     let proj = twin::project(cam, &g);
-    let bp = twin::BlendParams {
-        width: cam.width,
-        height: cam.height,
-        alpha_max: opts.alpha_max,
-        background: opts.background,
-        feature_dims: k,
-    };
+    let bp = twin_blend_params(cam, opts, k);
     let fwd = twin::blend_fwd(&bp, &proj, &scene.features);
     let px = (cam.width * cam.height) as usize;
     let u = upstream(17, px, k as usize);

@@ -117,13 +117,7 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
             "{ctx}: only {visible} of {n} visible: the scene tests little"
         );
 
-        let bp = twin::BlendParams {
-            width: w,
-            height: h,
-            alpha_max: opts.alpha_max,
-            background: opts.background,
-            feature_dims: k,
-        };
+        let bp = twin_blend_params(&cam, &opts, k);
         let fwd = twin::blend_fwd(&bp, &proj, &scene.features);
         let px = (w * h) as usize;
         let rgb: Vec<f32> = out.rgba.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
@@ -359,13 +353,7 @@ fn feature_weights_detached_from_the_opacity_factors() {
     let g64 = twin::Gaussians64::from_f32(&scene.twin());
     let w64: Vec<f64> = w.iter().map(|&v| v as f64).collect();
     let feats: Vec<f64> = scene.features.iter().map(|&v| v as f64).collect();
-    let bp = twin::BlendParams {
-        width: cam.width,
-        height: cam.height,
-        alpha_max: base.alpha_max,
-        background: base.background,
-        feature_dims: k,
-    };
+    let bp = twin_blend_params(&cam, &base, k);
     let d_rgb: Vec<[f64; 3]> = (0..px)
         .map(|p| std::array::from_fn(|c| u.rgba[4 * p + c] as f64))
         .collect();
@@ -532,13 +520,7 @@ fn bands_or_whole_tiles_picked_per_tile() {
     let u = upstream(seed + 100, px, k as usize);
     let g = scene.twin();
     let proj = twin::project(&cam, &g);
-    let bp = twin::BlendParams {
-        width: cam.width,
-        height: cam.height,
-        alpha_max: opts.alpha_max,
-        background: opts.background,
-        feature_dims: k,
-    };
+    let bp = twin_blend_params(&cam, &opts, k);
     let fwd = twin::blend_fwd(&bp, &proj, &scene.features);
     let bg = twin_blend_bwd(&bp, &proj, &scene.features, &fwd, &u);
     let pg = twin::project_bwd(&cam, &g, &proj, &bg);

@@ -394,3 +394,18 @@ pub fn rerun_single_threaded(gpu: &TestGpu, name: &str) -> bool {
     );
     true
 }
+
+/// The twin's blend parameters for a render of `cam` with `opts` and `k` feature channels.
+pub fn twin_blend_params(
+    cam: &Camera,
+    opts: &RenderOpts,
+    k: u32,
+) -> dispflow_vk::reference::raster::BlendParams {
+    dispflow_vk::reference::raster::BlendParams {
+        width: cam.width,
+        height: cam.height,
+        alpha_max: opts.alpha_max,
+        background: opts.background,
+        feature_dims: k,
+    }
+}
