@@ -22,7 +22,7 @@
 //   splat costs up to two loop iterations of lavapipe's 65 535 per invocation.
 // A pass on a CPU device dispatches both shapes, and each draws the tiles blend_pick.glsl gives
 // it (BlendParams.pick): the whole tile takes the lists longer than BAND_LIST_MAX (the loop
-// budget) and those whose splats mostly span every band (there four walks cost more than one).
+// budget) and, below the default threshold, those whose splats mostly span every band.
 // Subgroup layout is a matter of speed only: every subgroup operation below is correct for any
 // grouping of the invocations (the band is gl_LocalInvocationIndex / S).
 #extension GL_GOOGLE_include_directive : require

@@ -1,9 +1,11 @@
 // Which of the two CPU-shaped kernels of a blend pass draws a tile (BlendParams.pick), the
 // same answer in both: the band kernel (blend_*_tile.glsl with STEP_OVER) or the whole-tile
 // one. Bands pay one walk of the list per band and, in the backward, one fold per band that a
-// splat reaches; the whole tile pays every pixel of the tile for every splat. So a tile whose
-// splats mostly span the whole tile (the large faint splats of the initial points) goes whole,
-// one with small splats to the bands. The cover is sampled at BAND_SAMPLE evenly spaced list
+// splat reaches; the whole tile pays every pixel of the tile for every splat. So, below
+// band_cover_max = 32 (the default, where every list of at most BAND_LIST_MAX stays in bands:
+// the cover cannot see that a trained tile's bands stop early, docs/measurements.md), a tile
+// whose splats mostly span the whole tile goes whole, one with small splats to the bands. The
+// cover is sampled at BAND_SAMPLE evenly spaced list
 // entries, in bands of 4 rows (lavapipe's shape, whatever the device's subgroup size): a speed
 // choice only, the image is the same either way (forward bit for bit; backward up to the
 // order of float sums). Needs the bindings `ids`, `splats` and the push constants `pc`.

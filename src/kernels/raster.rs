@@ -164,11 +164,22 @@ pub const BAND_LIST_MAX: u32 = 32_000;
 /// `DISPFLOW_BAND_COVER` (0–32).
 pub const BAND_COVER_MAX: u32 = 32;
 
+/// `DISPFLOW_BAND_COVER`'s value, else [`BAND_COVER_MAX`]. A value that is not a number in
+/// 0–32 is reported on stderr (a typo must not pass as a measurement of the pick it meant), as
+/// the shape variables are (`shape::for_device`), and the default stands.
 fn band_cover_max() -> u32 {
-    std::env::var("DISPFLOW_BAND_COVER")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .map_or(BAND_COVER_MAX, |v: u32| v.min(32))
+    let Ok(v) = std::env::var("DISPFLOW_BAND_COVER") else {
+        return BAND_COVER_MAX;
+    };
+    match v.trim().parse::<u32>() {
+        Ok(c) if c <= 32 => c,
+        _ => {
+            eprintln!(
+                "warning: DISPFLOW_BAND_COVER={v} is not a number in 0-32; using {BAND_COVER_MAX}"
+            );
+            BAND_COVER_MAX
+        }
+    }
 }
 
 /// Blend options.
@@ -423,8 +434,8 @@ impl BlendBwdVariant {
 /// The default for a device: bands on CPU devices (lavapipe: 1.6–1.8× the per-tile
 /// accumulation on the issue-14 scenes and on a trained model's step, which was itself 10–14×
 /// the subgroup kernel, `bench --suite raster`; docs/measurements.md, "Blends in bands"), with
-/// `TileAccum` drawing the tiles whose list is longer than [`BAND_LIST_MAX`] or whose splats
-/// span most of its bands ([`BAND_COVER_MAX`]); the subgroup
+/// `TileAccum` drawing the tiles whose list is longer than [`BAND_LIST_MAX`] (and, with
+/// `DISPFLOW_BAND_COVER` below 32, those whose splats span most of their bands); the subgroup
 /// kernel on GPUs, where a few invocations per tile leave most of a warp idle (the whole
 /// CPU-shaped step measured 6.8–7.9× slower on an H200, docs/gpu_h200.md).
 /// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum|tile-bands` overrides the choice (benches,
@@ -472,8 +483,8 @@ impl BlendFwdVariant {
 
 /// The default for a device: pixels in registers, in bands, on CPU devices (lavapipe, `bench
 /// --suite raster`: 1.5–1.7× `TileRegs`, which draws the tiles whose list is longer than
-/// [`BAND_LIST_MAX`] or whose splats span most of its bands, [`BAND_COVER_MAX`]); the
-/// shared-memory kernel on GPUs, where a few invocations per tile
+/// [`BAND_LIST_MAX`] and, with `DISPFLOW_BAND_COVER` below 32, those whose splats span most of
+/// their bands); the shared-memory kernel on GPUs, where a few invocations per tile
 /// leave most of a warp idle (measured on an H200 with the backward: docs/gpu_h200.md).
 /// `DISPFLOW_BLEND_FWD=shared|tile-regs|tile-bands` overrides the choice (benches, tests).
 impl DeviceShape for BlendFwdVariant {
