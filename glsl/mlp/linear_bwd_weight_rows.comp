@@ -1,16 +1,21 @@
 #version 460
-// Weight and bias gradients on the register path (CPU devices): one invocation per input
-// column c (column fan_in is the constant 1: the bias) and block of OB outputs, walking the
-// rows of one uniform-buffer window of dz. Each input value is one per-lane load reused for OB
-// outputs; each dz value is a uniform-index load (a broadcast on llvmpipe). Windows run as
-// successive dispatches adding into one partial [fan_out][fan_in + 1] in a fixed order
-// (deterministic); mlp/reduce_grad moves it into the gradient buffer.
+// Weight and bias gradients on the register path (CPU devices): one invocation per C input
+// columns (column fan_in is the constant 1: the bias) and block of OB outputs, walking the
+// rows of one uniform-buffer window of dz. On llvmpipe a uniform-buffer load costs about as
+// much as a per-lane loop (about 20 cycles measured, a dozen FMAs), so each dz value feeds C
+// columns' FMAs and each input value (one per-lane load) OB outputs. C = 4 cut this kernel by
+// about a fifth (docs/measurements.md, "The MLP weight gradient, four columns per invocation").
+// Every accumulator sums its rows in row order, as with one column per invocation (the JIT may
+// still round its multiply-adds differently: not bit-equal to the one-column kernel).
+// Windows run as successive dispatches adding into one partial [fan_out][fan_in + 1] in a
+// fixed order (deterministic); mlp/reduce_grad moves it into the gradient buffer.
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
 #include "common.glsl"
 #include "params.glsl"
 
 #define OB 32
+#define C 4 // input columns per invocation: each dz load feeds C FMAs
 
 layout(local_size_x = 64) in;
 
@@ -23,25 +28,36 @@ layout(std430, binding = 3) buffer Partial { float partial[]; };
 float dz_at(uint i) { return dz4[i >> 2][i & 3]; }
 
 void main() {
-    uint c = gl_GlobalInvocationID.x;
+    uint c0 = gl_GlobalInvocationID.x * C;
     uint cols = pc.fan_in + 1;
-    if (c >= cols) return;
+    if (c0 >= cols) return;
     uint o0 = gl_WorkGroupID.y * OB;
-    float acc[OB];
-    [[unroll]] for (uint j = 0; j < OB; ++j) acc[j] = 0.0;
-    // Outputs past fan_out read output fan_out − 1 (inside the row) and are never stored.
+    float acc[C][OB];
+    [[unroll]] for (uint ci = 0; ci < C; ++ci)
+        [[unroll]] for (uint j = 0; j < OB; ++j) acc[ci][j] = 0.0;
     uint oc[OB];
     [[unroll]] for (uint j = 0; j < OB; ++j) oc[j] = min(o0 + j, pc.fan_out - 1);
     for (uint r = 0; r < pc.rows; ++r) {
         uint g = pc.r0 + r;
-        float x = c < pc.ka ? in_a[g * pc.a_stride + c]
-                : (c < pc.fan_in ? in_b[g * pc.b_stride + c - pc.ka] : 1.0);
+        float x[C];
+        [[unroll]] for (uint ci = 0; ci < C; ++ci) {
+            uint c = c0 + ci;
+            x[ci] = c < pc.ka ? in_a[g * pc.a_stride + c]
+                  : (c < pc.fan_in ? in_b[g * pc.b_stride + c - pc.ka] : 1.0);
+        }
         uint row = pc.dz_res + r * pc.dz_stride;
-        [[unroll]] for (uint j = 0; j < OB; ++j) acc[j] += dz_at(row + oc[j]) * x;
+        [[unroll]] for (uint j = 0; j < OB; ++j) {
+            float d = dz_at(row + oc[j]);
+            [[unroll]] for (uint ci = 0; ci < C; ++ci) acc[ci][j] += d * x[ci];
+        }
     }
-    [[unroll]] for (uint j = 0; j < OB; ++j) {
-        if (o0 + j >= pc.fan_out) continue;
-        uint e = (o0 + j) * cols + c;
-        partial[e] = pc.accumulate != 0 ? partial[e] + acc[j] : acc[j];
+    [[unroll]] for (uint ci = 0; ci < C; ++ci) {
+        uint c = c0 + ci;
+        if (c >= cols) continue;
+        [[unroll]] for (uint j = 0; j < OB; ++j) {
+            if (o0 + j >= pc.fan_out) continue;
+            uint e = (o0 + j) * cols + c;
+            partial[e] = pc.accumulate != 0 ? partial[e] + acc[ci][j] : acc[ci][j];
+        }
     }
 }

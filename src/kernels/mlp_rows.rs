@@ -3,7 +3,8 @@
 //! as the tiled GEMMs of [`super::mlp`], so the two paths are interchangeable per Linear.
 //!
 //! Why a second path: on lavapipe every storage-buffer or shared-memory load is a per-lane
-//! loop, while a uniform-buffer load at a uniform index is one scalar load and a broadcast.
+//! loop, while a uniform-buffer load at a uniform index is one scalar load and a broadcast
+//! (cheaper, but still about 20 cycles measured: the weight gradient reuses each for 4 FMAs).
 //! The kernel keeps each row's input in a private array and reads weights from a uniform
 //! buffer, so the matrix is bound in windows of whole rows of at most
 //! `maxUniformBufferRange` bytes (one dispatch per window).
@@ -120,6 +121,8 @@ pub struct Gemv<'a> {
 
 /// Outputs per invocation of the weight-gradient kernel (mirrors OB).
 const WEIGHT_OB: u32 = 32;
+/// Input columns per invocation of the weight-gradient kernel (mirrors C).
+const WEIGHT_C: u32 = 4;
 
 pub struct RowsPath {
     rows: ComputePipeline,
@@ -224,7 +227,11 @@ impl RowsPath {
         partial: BufSlice<'_>,
     ) {
         let per = ((self.range - self.align) / 4 / dz.1 as u64).max(1) as u32;
-        let grid = [(fan_in + 1).div_ceil(64), fan_out.div_ceil(WEIGHT_OB), 1];
+        let grid = [
+            (fan_in + 1).div_ceil(64 * WEIGHT_C),
+            fan_out.div_ceil(WEIGHT_OB),
+            1,
+        ];
         let binb = bb.map_or(a.0, |x| x.0);
         let mut r0 = 0;
         while r0 < n.max(1) {
