@@ -92,7 +92,7 @@ impl DeviceShape for MlpKernels {
 }
 
 /// Rows per invocation × invocations per workgroup (mirrors R and local_size_x).
-const ROWS_PER_GROUP: u32 = 4 * 64;
+const ROWS_PER_GROUP: u32 = 8 * 32;
 /// Largest fan-in the kernel's private array holds (mirrors KMAX); wider Linears use tiles.
 pub const KMAX: usize = 512;
 /// The uniform-buffer block's declared size (4096 vec4).
