@@ -5,8 +5,7 @@
 // much as a per-lane loop (about 20 cycles measured, a dozen FMAs), so each dz value feeds C
 // columns' FMAs and each input value (one per-lane load) OB outputs. C = 4 cut this kernel by
 // about a fifth (docs/measurements.md, "The MLP weight gradient, four columns per invocation").
-// Every accumulator sums its rows in row order, as with one column per invocation (the JIT may
-// still round its multiply-adds differently: not bit-equal to the one-column kernel).
+// Every accumulator sums its rows in row order, as with one column per invocation.
 // Windows run as successive dispatches adding into one partial [fan_out][fan_in + 1] in a
 // fixed order (deterministic); mlp/reduce_grad moves it into the gradient buffer.
 #extension GL_GOOGLE_include_directive : require
