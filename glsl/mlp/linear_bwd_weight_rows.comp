@@ -34,6 +34,7 @@ void main() {
     float acc[C][OB];
     [[unroll]] for (uint ci = 0; ci < C; ++ci)
         [[unroll]] for (uint j = 0; j < OB; ++j) acc[ci][j] = 0.0;
+    // Outputs past fan_out read output fan_out − 1 (inside the row) and are never stored.
     uint oc[OB];
     [[unroll]] for (uint j = 0; j < OB; ++j) oc[j] = min(o0 + j, pc.fan_out - 1);
     for (uint r = 0; r < pc.rows; ++r) {
