@@ -106,6 +106,7 @@ fn unknown_device_override_is_a_clear_error() {
     let opts = GpuOptions {
         validation: Validation::Off,
         device: Some("no-such-gpu-xyz".into()),
+        poison: None,
     };
     match Gpu::new(&opts) {
         Err(e) => {
@@ -117,4 +118,15 @@ fn unknown_device_override_is_a_clear_error() {
         }
         Ok(_) => panic!("a device named no-such-gpu-xyz should not exist"),
     }
+}
+
+#[test]
+fn poisoned_buffers_start_filled_with_the_word() {
+    let gpu = testing::gpu();
+    gpu.set_poison(Some(0x7fc0_0001));
+    let b = gpu.buffer("poisoned", 40);
+    gpu.set_poison(None);
+    let got: Vec<u32> = gpu.read(b.unwrap().all()).unwrap();
+    assert_eq!(got, vec![0x7fc0_0001; 10]);
+    assert_eq!(gpu.poison(), None);
 }

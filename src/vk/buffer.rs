@@ -173,9 +173,15 @@ impl Gpu {
         })
     }
 
-    /// Device-local buffer of `bytes` bytes (contents undefined).
+    /// Device-local buffer of `bytes` bytes (contents undefined; `GpuOptions::poison` fills it).
     pub fn buffer(&self, name: &str, bytes: u64) -> Result<Buffer> {
-        self.make_buffer(name, bytes, MemoryLocation::GpuOnly)
+        let b = self.make_buffer(name, bytes, MemoryLocation::GpuOnly)?;
+        if let Some(word) = self.poison() {
+            let mut rec = Recorder::new(self)?;
+            rec.fill(b.all(), word);
+            rec.finish()?;
+        }
+        Ok(b)
     }
 
     /// Host-visible buffer for results read every step without an extra submit: copy into it at

@@ -25,11 +25,16 @@ pub struct GpuOptions {
     /// Device index or case-insensitive name substring; `None` ranks discrete > integrated >
     /// virtual > CPU (lavapipe).
     pub device: Option<String>,
+    /// Fill every new device-local buffer with this word before handing it out (a debugging
+    /// aid: a kernel that reads memory nothing wrote then sees it; off = contents undefined).
+    pub poison: Option<u32>,
 }
 
 impl GpuOptions {
     /// `DISPFLOW_DEVICE=<index|name>` picks the device; `DISPFLOW_VALIDATION=1|required|0`
-    /// turns on the validation layer (default off).
+    /// turns on the validation layer (default off); `DISPFLOW_POISON=<u32, decimal or 0x hex>`
+    /// fills new device-local buffers with that word (an unparsable value is ignored with a
+    /// note on stderr).
     pub fn from_env() -> Self {
         let validation = match std::env::var("DISPFLOW_VALIDATION").as_deref() {
             Ok("required") => Validation::Required,
@@ -41,7 +46,28 @@ impl GpuOptions {
             device: std::env::var("DISPFLOW_DEVICE")
                 .ok()
                 .filter(|s| !s.is_empty()),
+            poison: std::env::var("DISPFLOW_POISON")
+                .ok()
+                .and_then(|v| match parse_word(&v) {
+                    Some(w) => Some(w),
+                    None => {
+                        eprintln!("note: DISPFLOW_POISON={v:?} is not a u32 (decimal or 0x hex); not poisoning");
+                        None
+                    }
+                }),
         }
+    }
+}
+
+fn poison_bits(word: Option<u32>) -> u64 {
+    word.map_or(0, |w| 1 << 32 | w as u64)
+}
+
+fn parse_word(v: &str) -> Option<u32> {
+    let v = v.trim();
+    match v.strip_prefix("0x").or_else(|| v.strip_prefix("0X")) {
+        Some(hex) => u32::from_str_radix(hex, 16).ok(),
+        None => v.parse().ok(),
     }
 }
 
@@ -122,6 +148,9 @@ pub struct Gpu {
     pub(crate) queue_family: u32,
     pub(crate) push_desc: ash::khr::push_descriptor::Device,
     pub info: DeviceInfo,
+    /// 0: off; else `1 << 32 | word` (see `GpuOptions::poison`; atomic so a test can steer the
+    /// shared test device).
+    poison: std::sync::atomic::AtomicU64,
 }
 
 /// Device memory held by the allocator: live allocations and the blocks reserved for them.
@@ -219,6 +248,18 @@ pub fn list_devices() -> Result<Vec<(String, String)>> {
 }
 
 impl Gpu {
+    /// The word new device-local buffers are filled with, if any (`GpuOptions::poison`).
+    pub fn poison(&self) -> Option<u32> {
+        let bits = self.poison.load(std::sync::atomic::Ordering::Relaxed);
+        (bits != 0).then_some(bits as u32)
+    }
+
+    /// Sets or clears `GpuOptions::poison` for the buffers allocated from now on.
+    pub fn set_poison(&self, word: Option<u32>) {
+        self.poison
+            .store(poison_bits(word), std::sync::atomic::Ordering::Relaxed);
+    }
+
     /// Device from `GpuOptions::from_env()`.
     pub fn new_default() -> Result<Gpu> {
         Gpu::new(&GpuOptions::from_env())
@@ -359,6 +400,7 @@ impl Gpu {
                     queue_family: qf,
                     push_desc,
                     info,
+                    poison: std::sync::atomic::AtomicU64::new(poison_bits(opts.poison)),
                 })
             }
             Err(e) => {
