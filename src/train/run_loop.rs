@@ -385,14 +385,16 @@ fn timing_table(iteration: u32, t: &crate::vk::Timings) -> String {
         .by_label()
         .iter()
         .map(|(k, ms)| {
+            let count = t.entries.iter().filter(|e| &e.0 == k).count();
             format!(
-                "  {k:<28} {ms:8.3} ms {:5.1}%",
+                "  {k:<28} {ms:8.3} ms {:5.1}% {count:>4}×",
                 100.0 * ms / total.max(1e-9)
             )
         })
         .collect();
     format!(
-        "GPU time of iteration {iteration} ({total:.2} ms):\n{}",
+        "GPU time of iteration {iteration} ({total:.2} ms, {} dispatches and copies):\n{}",
+        t.entries.len(),
         rows.join("\n")
     )
 }
