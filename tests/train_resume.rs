@@ -10,7 +10,7 @@
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::Checkpoint;
 use dispflow_vk::train::Trainer;
-use train_common::{run_to, tiny_config, tiny_dataset};
+use train_common::{run_to, spawn_transients, tiny_config, tiny_dataset, tiny_motion_config};
 
 mod train_common;
 
@@ -60,13 +60,7 @@ fn evaluating_mid_run_does_not_change_training() {
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
-    let mut cfg = tiny_config(60);
-    cfg.warm_up = 20;
-    cfg.motion_weight = 1.0;
-    cfg.motion_start = 25;
-    cfg.flow_preset = "fast".into();
-    cfg.densify.from = 10;
-    cfg.densify.interval = 20;
+    let cfg = tiny_motion_config();
     let run = |eval_at: Option<u32>| {
         let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
         while tr.iteration < 60 {
@@ -145,22 +139,8 @@ fn memory_nothing_wrote_changes_nothing() {
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
-    let mut cfg = tiny_config(60);
-    cfg.warm_up = 20;
-    cfg.motion_weight = 1.0;
-    cfg.motion_start = 25;
-    cfg.flow_preset = "fast".into();
-    cfg.densify.from = 10;
-    cfg.densify.interval = 20;
-    cfg.transient.mode = dispflow_vk::train::config::TransientMode::On;
-    cfg.transient.every = 15;
-    cfg.transient.from = 0.3;
-    cfg.transient.until = 0.9;
-    cfg.transient.frames = 2;
-    cfg.transient.pixels = 16;
-    cfg.transient.depths = 2;
-    cfg.transient.min_error = 0.05;
-    cfg.transient.persist = 0.0;
+    let mut cfg = tiny_motion_config();
+    spawn_transients(&mut cfg, 15, 0.3);
     /// Clears the poison however the run ends (the device is shared by this binary's tests).
     struct Clear<'a>(&'a dispflow_vk::vk::Gpu);
     impl Drop for Clear<'_> {

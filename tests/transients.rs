@@ -18,7 +18,7 @@ use dispflow_vk::train::checkpoint::Checkpoint;
 use dispflow_vk::train::config::{MotionWeights, SparsityMode, TrainConfig, TransientMode};
 use dispflow_vk::train::population::Reserve;
 use dispflow_vk::train::Trainer;
-use train_common::{tiny_config, tiny_dataset, tiny_scene};
+use train_common::{spawn_transients, tiny_config, tiny_dataset, tiny_scene};
 
 /// The tiny scene with transients spawned every 30 steps from iteration 60, densification every
 /// 50 from 40, an opacity reset at 150.
@@ -26,16 +26,8 @@ fn cfg() -> TrainConfig {
     let mut c = tiny_config(210);
     c.warm_up = 60;
     c.densify.opacity_reset_interval = 150;
-    c.transient.mode = TransientMode::On;
-    c.transient.every = 30;
-    c.transient.from = 0.25;
-    c.transient.until = 0.9;
-    c.transient.frames = 2;
-    c.transient.pixels = 16;
-    c.transient.depths = 2;
-    c.transient.min_error = 0.05;
     // Every spawn spawns (the persist gate's pairing has its unit tests in `transients`).
-    c.transient.persist = 0.0;
+    spawn_transients(&mut c, 30, 0.25);
     c
 }
 

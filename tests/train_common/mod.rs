@@ -48,6 +48,33 @@ pub fn tiny_config(iterations: u32) -> TrainConfig {
     c
 }
 
+/// `tiny_config(60)` with the motion term from 25 and densification at 20 and 40: every pass of
+/// a DispFlow step inside a minute.
+pub fn tiny_motion_config() -> TrainConfig {
+    let mut cfg = tiny_config(60);
+    cfg.warm_up = 20;
+    cfg.motion_weight = 1.0;
+    cfg.motion_start = 25;
+    cfg.flow_preset = "fast".into();
+    cfg.densify.from = 10;
+    cfg.densify.interval = 20;
+    cfg
+}
+
+/// Transients on, spawned every `every` steps between `from` and 90 % of the run from two
+/// frames, 16 pixels each at two depths; every spawn spawns (no persist gate).
+pub fn spawn_transients(c: &mut TrainConfig, every: u32, from: f32) {
+    c.transient.mode = dispflow_vk::train::config::TransientMode::On;
+    c.transient.every = every;
+    c.transient.from = from;
+    c.transient.until = 0.9;
+    c.transient.frames = 2;
+    c.transient.pixels = 16;
+    c.transient.depths = 2;
+    c.transient.min_error = 0.05;
+    c.transient.persist = 0.0;
+}
+
 /// A run of 60 iterations on the tiny scene for the CLI tests: deformation from 20, motion
 /// term from 40, densification, a checkpoint every `checkpoint_interval` iterations.
 pub fn tiny_toml(checkpoint_interval: u32) -> String {
