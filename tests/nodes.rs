@@ -4,7 +4,9 @@
 //! far from every node, a tiny radius, coincident nodes, a NaN mean. The twin itself is
 //! checked against central finite differences in `reference::nodes`.
 
-use dispflow_vk::kernels::nodes::{key_bits, BlendInputs, GatherShape, NodeKernels, NO_NODE};
+use dispflow_vk::kernels::nodes::{
+    key_bits, BlendInputs, GatherShape, NodeKernels, CONTRIB_STORED, NO_NODE,
+};
 use dispflow_vk::kernels::radix_sort::passes;
 use dispflow_vk::kernels::shape::DeviceShape;
 use dispflow_vk::reference::nodes::{nodes_gather, nodes_knn, nodes_lbs, nodes_lbs_bwd, Slot};
@@ -242,7 +244,7 @@ fn blend_checked_on(g: &Gpu3, p: &Problem, k: u32, split: bool, tol: f64) {
     let contrib = rd(&b.contrib);
 
     let ku = k as usize;
-    let mut all_contrib = vec![[0f64; 14]; n * ku];
+    let mut all_contrib = vec![[0f64; dispflow_vk::reference::nodes::CONTRIB]; n * ku];
     for (row, i) in (0..rows).map(|row| (row, if split { idx[row] as usize } else { row })) {
         let slots = p.slots(&knn[ku * i..ku * i + ku]);
         let want = nodes_lbs(p.mu(i), p.q(i), &slots);
@@ -277,7 +279,7 @@ fn blend_checked_on(g: &Gpu3, p: &Problem, k: u32, split: bool, tol: f64) {
         for (s, c) in cs.iter().enumerate() {
             all_contrib[ku * i + s] = *c;
             for (a, &want) in c.iter().enumerate() {
-                let at = (ku * i + s) * 14 + a;
+                let at = (ku * i + s) * CONTRIB_STORED as usize + a;
                 assert_close(
                     &format!("contrib[{i}][{s}][{a}]"),
                     &[contrib[at]],

@@ -13,6 +13,10 @@
 #define RHO_MAX 8.0
 // Floats per (Gaussian, slot) contribution row: ∂T 3, ∂dq 4, ∂ds 3, ∂p 3, ∂ρ 1.
 #define CONTRIB 14
+// A row is stored padded to 16 floats as 4 vec4 (components in the same order, 14 and 15 zero):
+// llvmpipe loops over the lanes once per SSBO access, whatever its width, so a vec4 costs
+// about what one float does.
+#define CONTRIB_VEC4 4
 
 vec4 qmul(vec4 a, vec4 b) {
     return vec4(a.x * b.x - a.y * b.y - a.z * b.z - a.w * b.w,

@@ -1,6 +1,22 @@
 // The blend of one Gaussian's K nearest node transforms (docs/nodes.md), shared by
 // nodes_lbs.comp and nodes_lbs_bwd.comp. Expects the bindings `nodes` (node parameters),
-// `node_out` ([M,10] T, dq, ds) and `knn`, and the push constants `pc`.
+// `node_out` ([M,10] T, dq, ds, declared as vec2 [M,5]: llvmpipe loops over the lanes once
+// per SSBO access, so two floats a load halve the loops) and `knn`, and the push constants `pc`.
+
+vec3 node_t(uint j) {
+    vec2 a = node_out[5 * j], b = node_out[5 * j + 1];
+    return vec3(a, b.x);
+}
+
+vec4 node_dq(uint j) {
+    vec2 a = node_out[5 * j + 1], b = node_out[5 * j + 2], c = node_out[5 * j + 3];
+    return vec4(a.y, b, c.x);
+}
+
+vec3 node_ds(uint j) {
+    vec2 a = node_out[5 * j + 3], b = node_out[5 * j + 4];
+    return vec3(a.y, b);
+}
 
 // Per-slot state of one Gaussian's blend.
 struct Blend {
@@ -37,8 +53,8 @@ Blend blend_of(uint i, vec3 mu) {
         b.v[s] = mu - vec3(nodes[3 * j], nodes[3 * j + 1], nodes[3 * j + 2]);
         a[s] = -0.5 * dot(b.v[s], b.v[s]) * b.inv[s];
         if (on) amax = max(amax, a[s]);
-        vec4 r = vec4(1.0 + node_out[10 * j + 3], node_out[10 * j + 4], node_out[10 * j + 5],
-                      node_out[10 * j + 6]);
+        vec4 r = node_dq(j);
+        r.x += 1.0;
         b.rn[s] = quat_normalize(r, b.rlen[s]);
         if (on) b.count = s + 1;
     }
@@ -53,12 +69,4 @@ Blend blend_of(uint i, vec3 mu) {
         if (s < b.count) b.Q += b.w[s] * b.rn[s];
     }
     return b;
-}
-
-vec3 node_t(uint j) {
-    return vec3(node_out[10 * j], node_out[10 * j + 1], node_out[10 * j + 2]);
-}
-
-vec3 node_ds(uint j) {
-    return vec3(node_out[10 * j + 7], node_out[10 * j + 8], node_out[10 * j + 9]);
 }

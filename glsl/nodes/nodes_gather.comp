@@ -14,7 +14,7 @@ layout(local_size_x = WG) in;
 layout(push_constant) uniform Push { NodesParams pc; };
 layout(std430, binding = 0) readonly buffer Ranges { uint ranges[]; };    // [M,2]
 layout(std430, binding = 1) readonly buffer Vals { uint vals[]; };        // sorted pair ids
-layout(std430, binding = 2) readonly buffer Contrib { float contrib[]; }; // [pairs,14]
+layout(std430, binding = 2) readonly buffer Contrib { vec4 contrib[]; };  // [pairs,4] (CONTRIB_VEC4)
 layout(std430, binding = 3) writeonly buffer DNodeOut { float d_out[]; }; // [M,10]
 layout(std430, binding = 4) buffer GNodes { float g_nodes[]; };           // [4M]
 
@@ -25,12 +25,14 @@ void main() {
     uint t = gl_LocalInvocationID.x;
     if (j >= pc.m) return; // whole workgroup: uniform
     uint start = ranges[2 * j], end = ranges[2 * j + 1];
-    float acc[CONTRIB];
-    for (uint c = 0; c < CONTRIB; ++c) acc[c] = 0.0;
+    vec4 acc4[CONTRIB_VEC4];
+    for (uint c = 0; c < CONTRIB_VEC4; ++c) acc4[c] = vec4(0.0);
     for (uint p = start + t; p < end; p += WG) {
-        uint o = vals[p] * CONTRIB;
-        for (uint c = 0; c < CONTRIB; ++c) acc[c] += contrib[o + c];
+        uint o = vals[p] * CONTRIB_VEC4;
+        for (uint c = 0; c < CONTRIB_VEC4; ++c) acc4[c] += contrib[o + c];
     }
+    float acc[CONTRIB];
+    for (uint c = 0; c < CONTRIB; ++c) acc[c] = acc4[c / 4][c % 4];
     for (uint c = 0; c < CONTRIB; ++c) part[c][t] = acc[c];
     barrier();
     for (uint h = WG / 2; h > 0; h >>= 1) {

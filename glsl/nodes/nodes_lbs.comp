@@ -13,12 +13,12 @@ layout(local_size_x = 128) in;
 
 layout(push_constant) uniform Push { NodesParams pc; };
 layout(std430, binding = 0) readonly buffer Means { float means[]; };     // [N,3] canonical
-layout(std430, binding = 1) readonly buffer Quats { float quats[]; };     // [N,4] canonical
+layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };      // [N] canonical
 layout(std430, binding = 2) readonly buffer Nodes { float nodes[]; };     // [4M]
-layout(std430, binding = 3) readonly buffer NodeOut { float node_out[]; }; // [M,10]
+layout(std430, binding = 3) readonly buffer NodeOut { vec2 node_out[]; }; // [M,10] as [M,5]
 layout(std430, binding = 4) readonly buffer Knn { uint knn[]; };          // [N,K]
 layout(std430, binding = 5) readonly buffer Idx { uint idx[]; };          // [rows] (flags 1)
-layout(std430, binding = 6) writeonly buffer Out { float d[]; };          // [rows,10]
+layout(std430, binding = 6) writeonly buffer Out { vec2 d[]; };           // [rows,10] as [rows,5]
 
 #include "nodes_blend.glsl"
 
@@ -38,14 +38,13 @@ void main() {
             ds += b.w[s] * node_ds(j);
         }
         float ql, qbl;
-        vec4 qn = quat_normalize(vec4(quats[4 * i], quats[4 * i + 1], quats[4 * i + 2],
-                                      quats[4 * i + 3]), ql);
+        vec4 qn = quat_normalize(quats[i], ql);
         vec4 qb = quat_normalize(b.Q, qbl);
         dr = qmul(qb, qn) - qn;
     }
-    for (uint a = 0; a < 3u; ++a) {
-        d[10 * r + a] = dx[a];
-        d[10 * r + 7 + a] = ds[a];
-    }
-    for (uint a = 0; a < 4u; ++a) d[10 * r + 3 + a] = dr[a];
+    d[5 * r] = dx.xy;
+    d[5 * r + 1] = vec2(dx.z, dr.x);
+    d[5 * r + 2] = dr.yz;
+    d[5 * r + 3] = vec2(dr.w, ds.x);
+    d[5 * r + 4] = ds.yz;
 }

@@ -13,15 +13,15 @@ layout(local_size_x = 128) in;
 
 layout(push_constant) uniform Push { NodesParams pc; };
 layout(std430, binding = 0) readonly buffer Means { float means[]; };     // [N,3] canonical
-layout(std430, binding = 1) readonly buffer Quats { float quats[]; };     // [N,4] canonical
+layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };      // [N] canonical
 layout(std430, binding = 2) readonly buffer Nodes { float nodes[]; };     // [4M]
-layout(std430, binding = 3) readonly buffer NodeOut { float node_out[]; }; // [M,10]
+layout(std430, binding = 3) readonly buffer NodeOut { vec2 node_out[]; }; // [M,10] as [M,5]
 layout(std430, binding = 4) readonly buffer Knn { uint knn[]; };          // [N,K]
 layout(std430, binding = 5) readonly buffer Idx { uint idx[]; };          // [rows] (flags 1)
-layout(std430, binding = 6) readonly buffer DOut { float g[]; };          // [rows,10] ∂L/∂D
-layout(std430, binding = 7) writeonly buffer Contrib { float contrib[]; }; // [N,K,14]
+layout(std430, binding = 6) readonly buffer DOut { vec2 g[]; };           // [rows,10] ∂L/∂D as [rows,5]
+layout(std430, binding = 7) writeonly buffer Contrib { vec4 contrib[]; };  // [N,K,4] (CONTRIB_VEC4)
 layout(std430, binding = 8) buffer GMeans { float g_means[]; };           // [N,3] +=
-layout(std430, binding = 9) buffer GQuats { float g_quats[]; };           // [N,4] +=
+layout(std430, binding = 9) buffer GQuats { vec4 g_quats[]; };            // [N] +=
 
 #include "nodes_blend.glsl"
 
@@ -32,14 +32,14 @@ void main() {
     vec3 mu = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
     Blend b = blend_of(i, mu);
     if (b.count == 0) return;
-    vec3 gx = vec3(g[10 * r], g[10 * r + 1], g[10 * r + 2]);
-    vec4 gr = vec4(g[10 * r + 3], g[10 * r + 4], g[10 * r + 5], g[10 * r + 6]);
-    vec3 gs = vec3(g[10 * r + 7], g[10 * r + 8], g[10 * r + 9]);
+    vec2 g0 = g[5 * r], g1 = g[5 * r + 1], g2 = g[5 * r + 2], g3 = g[5 * r + 3], g4 = g[5 * r + 4];
+    vec3 gx = vec3(g0, g1.x);
+    vec4 gr = vec4(g1.y, g2, g3.x);
+    vec3 gs = vec3(g3.y, g4);
 
     // dr = q_b ⊗ q̂ − q̂.
     float ql, qbl;
-    vec4 qn = quat_normalize(vec4(quats[4 * i], quats[4 * i + 1], quats[4 * i + 2],
-                                  quats[4 * i + 3]), ql);
+    vec4 qn = quat_normalize(quats[i], ql);
     vec4 qb = quat_normalize(b.Q, qbl);
     vec4 g_qn = qmul(qconj(qb), gr) - gr;
     vec4 g_Q = unit_grad(qb, qbl, qmul(gr, qconj(qn)));
@@ -68,16 +68,14 @@ void main() {
         vec3 g_v = w * (transpose(R) * gx - gx) - ga * b.inv[s] * b.v[s];
         float g_rho = b.clamped[s] ? 0.0 : ga * dot(b.v[s], b.v[s]) * b.inv[s];
         g_mu += g_v;
-        uint o = (i * pc.k + s) * CONTRIB;
-        for (uint a = 0; a < 3u; ++a) {
-            contrib[o + a] = w * gx[a];
-            contrib[o + 7 + a] = w * gs[a];
-            contrib[o + 10 + a] = -g_v[a];
-        }
-        for (uint a = 0; a < 4u; ++a) contrib[o + 3 + a] = g_dq[a];
-        contrib[o + 13] = g_rho;
+        uint o = (i * pc.k + s) * CONTRIB_VEC4;
+        vec3 t = w * gx, d = w * gs, p = -g_v;
+        contrib[o] = vec4(t, g_dq.x);
+        contrib[o + 1] = vec4(g_dq.yzw, d.x);
+        contrib[o + 2] = vec4(d.yz, p.xy);
+        contrib[o + 3] = vec4(p.z, g_rho, 0.0, 0.0);
     }
     for (uint a = 0; a < 3u; ++a) g_means[3 * i + a] += g_mu[a];
     vec4 g_q = unit_grad(qn, ql, g_qn);
-    for (uint a = 0; a < 4u; ++a) g_quats[4 * i + a] += g_q[a];
+    g_quats[i] += g_q;
 }

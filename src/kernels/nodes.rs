@@ -17,8 +17,10 @@ use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
 pub const KMAX: u32 = 8;
 /// An empty KNN slot (mirrors `NO_NODE`).
 pub const NO_NODE: u32 = u32::MAX;
-/// Floats per contribution row (mirrors `CONTRIB`).
+/// Floats per contribution row (mirrors `CONTRIB`); stored padded to 16 (`CONTRIB_VEC4` vec4).
 pub const CONTRIB: u64 = 14;
+/// Floats each contribution row takes in the buffer (4 vec4, mirrors `CONTRIB_VEC4`).
+pub const CONTRIB_STORED: u64 = 16;
 /// Clamp of the node log-radius (mirrors `RHO_MIN`/`RHO_MAX`).
 pub const RHO_MIN: f32 = -16.0;
 pub const RHO_MAX: f32 = 8.0;
@@ -196,7 +198,7 @@ impl NodeKernels {
                 .sort
                 .buffers(gpu, "node pairs", pairs32, KeyWidth::U32)?,
             ranges: gpu.buffer("node ranges", max_nodes as u64 * 8)?,
-            contrib: gpu.buffer("node contributions", pairs * CONTRIB * 4)?,
+            contrib: gpu.buffer("node contributions", pairs * CONTRIB_STORED * 4)?,
         })
     }
 
