@@ -9,19 +9,14 @@ use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::Checkpoint;
 use dispflow_vk::train::config::TrainConfig;
 use dispflow_vk::train::Trainer;
-use train_common::{run_to, tiny_config, tiny_dataset};
+use train_common::{run_to, tiny_dataset, tiny_motion_config};
 
 mod train_common;
 
 fn nodes_config() -> TrainConfig {
-    let mut cfg = tiny_config(60);
-    cfg.warm_up = 20;
-    cfg.motion_weight = 1.0;
-    cfg.motion_start = 25;
-    cfg.flow_preset = "fast".into();
-    cfg.densify.from = 10;
-    cfg.densify.interval = 20; // densify at 20 and 40: before and after the interruption
-    cfg.densify.until = 61; // and at the last step, 60 (`until` is exclusive, as the official)
+    // Densification at 20 and 40 (before and after the interruption) ...
+    let mut cfg = tiny_motion_config();
+    cfg.densify.until = 61; // ... and at the last step, 60 (`until` is exclusive, as the official)
     cfg.deform_field.kind = FieldKind::Nodes;
     cfg.deform_field.nodes = 24;
     cfg.deform_field.knn = 4;

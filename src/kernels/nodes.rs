@@ -107,7 +107,7 @@ pub struct NodeBuffers {
     pub sort: SortBuffers,
     /// [max_nodes, 2] u32: each node's range in the sorted pairs.
     pub ranges: Buffer,
-    /// [capacity, K, 14] f32 contribution rows of the backward.
+    /// [capacity, K, 16] f32 contribution rows of the backward (14 floats padded to 4 vec4).
     pub contrib: Buffer,
 }
 
