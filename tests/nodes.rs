@@ -5,7 +5,7 @@
 //! checked against central finite differences in `reference::nodes`.
 
 use dispflow_vk::kernels::nodes::{
-    key_bits, BlendInputs, GatherShape, NodeKernels, CONTRIB_STORED, NO_NODE,
+    key_bits, BlendInputs, GatherShape, NodeKernels, SlotLoop, CONTRIB_STORED, NO_NODE,
 };
 use dispflow_vk::kernels::radix_sort::passes;
 use dispflow_vk::kernels::shape::DeviceShape;
@@ -96,6 +96,12 @@ impl Gpu3 {
     fn with_gather(shape: GatherShape) -> Self {
         let gpu = testing::gpu();
         let k = NodeKernels::with_gather(&gpu, shape).unwrap();
+        Gpu3 { gpu, k }
+    }
+
+    fn with_shapes(shape: GatherShape, slots: SlotLoop) -> Self {
+        let gpu = testing::gpu();
+        let k = NodeKernels::with_shapes(&gpu, shape, slots).unwrap();
         Gpu3 { gpu, k }
     }
 
@@ -326,11 +332,15 @@ fn blend_checked_on(g: &Gpu3, p: &Problem, k: u32, split: bool, tol: f64) {
 
 #[test]
 fn blend_forward_backward_and_gather_match_the_twin() {
-    // Both gather shapes (the tree GPUs run, the serial loop CPU devices run) against the twin.
+    // Both gather shapes (the tree GPUs run, the serial loop CPU devices run) and both slot
+    // loops (all 8 slots, as GPUs; 4 slots at K <= 4, as CPU devices) against the twin.
     for shape in [GatherShape::Tree, GatherShape::Serial] {
-        blend_checked(&problem(4, 200, 23), 4, false, 2e-4, shape);
-        blend_checked(&problem(5, 120, 9), 1, false, 2e-4, shape);
-        blend_checked(&problem(6, 150, 17), 8, true, 2e-4, shape);
+        for slots in [SlotLoop::Max, SlotLoop::Fit] {
+            let g = Gpu3::with_shapes(shape, slots);
+            blend_checked_on(&g, &problem(4, 200, 23), 4, false, 2e-4);
+            blend_checked_on(&g, &problem(5, 120, 9), 1, false, 2e-4);
+            blend_checked_on(&g, &problem(6, 150, 17), 8, true, 2e-4);
+        }
     }
 }
 

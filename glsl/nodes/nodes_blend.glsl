@@ -36,12 +36,13 @@ Blend blend_of(uint i, vec3 mu) {
     b.count = 0;
     float amax = -1.0 / 0.0;
     float a[NODES_KMAX];
-    // Every loop over the slots (here and in the kernels) runs to the constant NODES_KMAX with
+    // Every loop over the slots (here and in the kernels) runs to the constant NODES_KLOOP
+    // (NODES_KMAX, or 4 in the _k4 kernels for K <= 4) with
     // the unused slots masked off by `s < b.count` (never multiplied by a zero weight: their
     // stand-in node 0 may hold anything): lavapipe keeps an array indexed by a run-time counter
     // in scratch memory, where each access is a loop over the lanes; unrolled, the slots live
     // in registers.
-    for (uint s = 0; s < NODES_KMAX; ++s) {
+    for (uint s = 0; s < NODES_KLOOP; ++s) {
         uint j = s < pc.k ? knn[i * pc.k + s] : NO_NODE;
         // The valid slots are a prefix: the first NO_NODE ends them.
         bool on = s == b.count && j < pc.m;
@@ -59,12 +60,12 @@ Blend blend_of(uint i, vec3 mu) {
         if (on) b.count = s + 1;
     }
     float sum = 0.0;
-    for (uint s = 0; s < NODES_KMAX; ++s) {
+    for (uint s = 0; s < NODES_KLOOP; ++s) {
         b.w[s] = s < b.count ? exp(a[s] - amax) : 0.0;
         sum += b.w[s];
     }
     b.Q = vec4(0.0);
-    for (uint s = 0; s < NODES_KMAX; ++s) {
+    for (uint s = 0; s < NODES_KLOOP; ++s) {
         b.w[s] = s < b.count ? b.w[s] / sum : 0.0;
         if (s < b.count) b.Q += b.w[s] * b.rn[s];
     }

@@ -35,11 +35,13 @@ pub struct KernelSet {
     pub binning: &'static str,
     /// The motion normalisation's magnitude pass (`DISPFLOW_MOTION_NORM`).
     pub motion_norm: &'static str,
+    /// The slots the control-node blend loops over (`DISPFLOW_NODES_SLOTS`).
+    pub nodes_slots: &'static str,
 }
 
 impl KernelSet {
     /// Each choice with the variable that carries it.
-    fn vars(&self) -> [(&'static str, &'static str); 9] {
+    fn vars(&self) -> [(&'static str, &'static str); 10] {
         use crate::kernels::{
             binning, loss, mlp_rows, motion, nodes, radix_sort, raster, shape::DeviceShape,
         };
@@ -53,6 +55,7 @@ impl KernelSet {
             (raster::SplatExtent::ENV, self.splat_extent),
             (binning::Binning::ENV, self.binning),
             (motion::NormMagShape::ENV, self.motion_norm),
+            (nodes::SlotLoop::ENV, self.nodes_slots),
         ]
     }
 
@@ -74,7 +77,8 @@ impl KernelSet {
 /// The choice before issue 14, the CPU set after it (3σ tile squares), the same kernels
 /// binning each splat to its opacity-aware box (issue 60), the same boxes binned depth first
 /// with the motion magnitude in runs (issue 60), and today's CPU default: that set with the
-/// blends in bands (issue 60).
+/// blends in bands (issue 60) and the control-node blend over 4 slots at K <= 4 (stop 71; the
+/// older sets loop over all 8).
 pub const KERNEL_SETS: [KernelSet; 5] = [
     KernelSet {
         name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
@@ -87,6 +91,7 @@ pub const KERNEL_SETS: [KernelSet; 5] = [
         splat_extent: "radius",
         binning: "radix",
         motion_norm: "tree",
+        nodes_slots: "max",
     },
     KernelSet {
         name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather + rows \
@@ -100,6 +105,7 @@ pub const KERNEL_SETS: [KernelSet; 5] = [
         splat_extent: "radius",
         binning: "radix",
         motion_norm: "tree",
+        nodes_slots: "max",
     },
     KernelSet {
         name: "the same CPU kernels, opacity-aware tile boxes",
@@ -112,6 +118,7 @@ pub const KERNEL_SETS: [KernelSet; 5] = [
         splat_extent: "opacity-box",
         binning: "radix",
         motion_norm: "tree",
+        nodes_slots: "max",
     },
     KernelSet {
         name: "the same CPU kernels, opacity-aware tile boxes, depth-first binning, motion \
@@ -125,6 +132,7 @@ pub const KERNEL_SETS: [KernelSet; 5] = [
         splat_extent: "opacity-box",
         binning: "depth-first",
         motion_norm: "runs",
+        nodes_slots: "max",
     },
     KernelSet {
         name: "the same, blends in bands of rows stepping over the splats that miss them",
@@ -137,6 +145,7 @@ pub const KERNEL_SETS: [KernelSet; 5] = [
         splat_extent: "opacity-box",
         binning: "depth-first",
         motion_norm: "runs",
+        nodes_slots: "fit",
     },
 ];
 

@@ -65,6 +65,8 @@ pub struct NodeKernels {
     ranges: ComputePipeline,
     lbs: ComputePipeline,
     lbs_bwd: ComputePipeline,
+    /// The blend and its backward over 4 slots (`SlotLoop::Fit`, for K <= 4).
+    lbs4: Option<(ComputePipeline, ComputePipeline)>,
     gather: ComputePipeline,
     /// Which gather shape `gather` is.
     pub gather_shape: GatherShape,
@@ -94,6 +96,33 @@ impl DeviceShape for GatherShape {
         match self {
             GatherShape::Tree => "tree",
             GatherShape::Serial => "serial",
+        }
+    }
+}
+
+/// How many slots the blend kernels loop over. Both give the same bits: the slots past K are
+/// masked off either way.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SlotLoop {
+    /// Always `KMAX` (GPUs: a masked slot costs little where lanes diverge anyway).
+    Max,
+    /// 4 when K <= 4, else `KMAX` (CPU devices: llvmpipe runs a masked slot's loads and maths
+    /// as if it were used, so at the default K = 4 the 8-slot loop spends half its time on
+    /// nothing; docs/measurements.md, stop 71).
+    Fit,
+}
+
+/// `fit` on CPU devices, `max` elsewhere (override: `DISPFLOW_NODES_SLOTS=max|fit`).
+impl DeviceShape for SlotLoop {
+    const ENV: &'static str = "DISPFLOW_NODES_SLOTS";
+    const ALL: &'static [Self] = &[SlotLoop::Max, SlotLoop::Fit];
+    const CPU: Self = SlotLoop::Fit;
+    const GPU: Self = SlotLoop::Max;
+
+    fn name(self) -> &'static str {
+        match self {
+            SlotLoop::Max => "max",
+            SlotLoop::Fit => "fit",
         }
     }
 }
@@ -167,6 +196,11 @@ impl NodeKernels {
 
     /// The kernels with the gather of shape `gather` (tests and benches run both).
     pub fn with_gather(gpu: &Gpu, gather: GatherShape) -> Result<Self> {
+        Self::with_shapes(gpu, gather, SlotLoop::for_device(&gpu.info))
+    }
+
+    /// The kernels with both shapes given (tests run every pair).
+    pub fn with_shapes(gpu: &Gpu, gather: GatherShape, slots: SlotLoop) -> Result<Self> {
         use shaders::nodes as s;
         Ok(NodeKernels {
             knn: gpu.pipeline(&s::NODES_KNN)?,
@@ -174,6 +208,13 @@ impl NodeKernels {
             ranges: gpu.pipeline(&s::NODES_RANGES)?,
             lbs: gpu.pipeline(&s::NODES_LBS)?,
             lbs_bwd: gpu.pipeline(&s::NODES_LBS_BWD)?,
+            lbs4: match slots {
+                SlotLoop::Fit => Some((
+                    gpu.pipeline(&s::NODES_LBS_K4)?,
+                    gpu.pipeline(&s::NODES_LBS_BWD_K4)?,
+                )),
+                SlotLoop::Max => None,
+            },
             gather: gpu.pipeline(match gather {
                 GatherShape::Tree => &s::NODES_GATHER,
                 GatherShape::Serial => &s::NODES_GATHER_SERIAL,
@@ -270,7 +311,11 @@ impl NodeKernels {
         let (pc, idx) = x.params(rows, idx);
         let binds = [x.means, x.quats, x.nodes, x.node_out, x.knn, idx, out];
         let outer = rec.set_zone("nodes blend");
-        rec.dispatch_rows(&self.lbs, &pc, &binds, rows);
+        let lbs = match &self.lbs4 {
+            Some((f, _)) if x.k <= 4 => f,
+            _ => &self.lbs,
+        };
+        rec.dispatch_rows(lbs, &pc, &binds, rows);
         rec.set_zone(&outer);
     }
 
@@ -303,7 +348,11 @@ impl NodeKernels {
             g_quats,
         ];
         let outer = rec.set_zone("nodes blend bwd");
-        rec.dispatch_rows(&self.lbs_bwd, &pc, &binds, rows);
+        let bwd = match &self.lbs4 {
+            Some((_, b)) if x.k <= 4 => b,
+            _ => &self.lbs_bwd,
+        };
+        rec.dispatch_rows(bwd, &pc, &binds, rows);
         rec.set_zone(&outer);
     }
 

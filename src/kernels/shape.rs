@@ -67,7 +67,7 @@ pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'s
         (what, S::for_device(info).name(), S::ENV)
     }
     use super::{binning::Binning, loss::BlurShape, mlp_rows::MlpKernels, motion::NormMagShape};
-    use super::{nodes::GatherShape, radix_sort, raster};
+    use super::{nodes, nodes::GatherShape, radix_sort, raster};
     vec![
         row::<MlpKernels>("MLP", info),
         row::<raster::BlendFwdVariant>("blend forward", info),
@@ -75,6 +75,7 @@ pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'s
         row::<raster::SplatExtent>("splat extent", info),
         row::<Binning>("tile binning", info),
         row::<GatherShape>("node gather", info),
+        row::<nodes::SlotLoop>("node blend slots", info),
         row::<BlurShape>("loss blur", info),
         row::<NormMagShape>("motion magnitude", info),
         row::<radix_sort::SortShape>("radix sort", info),

@@ -1,0 +1,82 @@
+// Body of nodes_lbs_bwd.comp (slots to NODES_KMAX) and nodes_lbs_bwd_k4.comp (4 slots: K <= 4);
+// the wrapper defines NODES_KLOOP.
+// Backward of nodes_lbs: from ∂L/∂D of each row to one contribution row per (Gaussian, slot)
+// (∂T, ∂dq, ∂ds, ∂p, ∂ρ; summed per node by nodes_gather, no atomics) and to the canonical
+// mean and quaternion, ADDED to their gradients (the composition's backward wrote them).
+// Every path is differentiated, the weights' dependence on μ, p and ρ included.
+#extension GL_GOOGLE_include_directive : require
+#include "common.glsl"
+#include "params.glsl"
+#include "raster.glsl"
+#include "nodes.glsl"
+
+layout(local_size_x = 128) in;
+
+layout(push_constant) uniform Push { NodesParams pc; };
+layout(std430, binding = 0) readonly buffer Means { float means[]; };     // [N,3] canonical
+layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };      // [N] canonical
+layout(std430, binding = 2) readonly buffer Nodes { float nodes[]; };     // [4M]
+layout(std430, binding = 3) readonly buffer NodeOut { vec2 node_out[]; }; // [M,10] as [M,5]
+layout(std430, binding = 4) readonly buffer Knn { uint knn[]; };          // [N,K]
+layout(std430, binding = 5) readonly buffer Idx { uint idx[]; };          // [rows] (flags 1)
+layout(std430, binding = 6) readonly buffer DOut { vec2 g[]; };           // [rows,10] ∂L/∂D as [rows,5]
+layout(std430, binding = 7) writeonly buffer Contrib { vec4 contrib[]; };  // [N,K,4] (CONTRIB_VEC4)
+layout(std430, binding = 8) buffer GMeans { float g_means[]; };           // [N,3] +=
+layout(std430, binding = 9) buffer GQuats { vec4 g_quats[]; };            // [N] +=
+
+#include "nodes_blend.glsl"
+
+void main() {
+    uint r = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    if (r >= pc.n) return;
+    uint i = (pc.flags & 1u) != 0u ? idx[r] : r;
+    vec3 mu = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+    Blend b = blend_of(i, mu);
+    if (b.count == 0) return;
+    vec2 g0 = g[5 * r], g1 = g[5 * r + 1], g2 = g[5 * r + 2], g3 = g[5 * r + 3], g4 = g[5 * r + 4];
+    vec3 gx = vec3(g0, g1.x);
+    vec4 gr = vec4(g1.y, g2, g3.x);
+    vec3 gs = vec3(g3.y, g4);
+
+    // dr = q_b ⊗ q̂ − q̂.
+    float ql, qbl;
+    vec4 qn = quat_normalize(quats[i], ql);
+    vec4 qb = quat_normalize(b.Q, qbl);
+    vec4 g_qn = qmul(qconj(qb), gr) - gr;
+    vec4 g_Q = unit_grad(qb, qbl, qmul(gr, qconj(qn)));
+
+    // Per slot: ∂L/∂w before the softmax, and everything that does not go through w.
+    float gw[NODES_KLOOP];
+    float gbar = 0.0;
+    vec3 g_mu = vec3(0.0);
+    for (uint s = 0; s < NODES_KLOOP; ++s) {
+        gw[s] = 0.0;
+        if (s >= b.count) continue; // masked (nodes_blend.glsl)
+        uint j = b.node[s];
+        mat3 R = quat_to_mat(b.rn[s]);
+        vec3 e = R * b.v[s] - b.v[s] + node_t(j);
+        gw[s] = dot(gx, e) + dot(gs, node_ds(j)) + dot(g_Q, b.rn[s]);
+        gbar += b.w[s] * gw[s];
+    }
+    for (uint s = 0; s < NODES_KLOOP; ++s) {
+        if (s >= b.count) continue; // masked (nodes_blend.glsl)
+        uint j = b.node[s];
+        float w = b.w[s];
+        mat3 R = quat_to_mat(b.rn[s]);
+        vec4 g_rn = w * g_Q + quat_to_mat_grad(b.rn[s], w * outerProduct(gx, b.v[s]));
+        vec4 g_dq = unit_grad(b.rn[s], b.rlen[s], g_rn);
+        float ga = w * (gw[s] - gbar);
+        vec3 g_v = w * (transpose(R) * gx - gx) - ga * b.inv[s] * b.v[s];
+        float g_rho = b.clamped[s] ? 0.0 : ga * dot(b.v[s], b.v[s]) * b.inv[s];
+        g_mu += g_v;
+        uint o = (i * pc.k + s) * CONTRIB_VEC4;
+        vec3 t = w * gx, d = w * gs, p = -g_v;
+        contrib[o] = vec4(t, g_dq.x);
+        contrib[o + 1] = vec4(g_dq.yzw, d.x);
+        contrib[o + 2] = vec4(d.yz, p.xy);
+        contrib[o + 3] = vec4(p.z, g_rho, 0.0, 0.0);
+    }
+    for (uint a = 0; a < 3u; ++a) g_means[3 * i + a] += g_mu[a];
+    vec4 g_q = unit_grad(qn, ql, g_qn);
+    g_quats[i] += g_q;
+}
