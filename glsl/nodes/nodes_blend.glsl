@@ -1,7 +1,32 @@
 // The blend of one Gaussian's K nearest node transforms (docs/nodes.md), shared by
-// nodes_lbs.comp and nodes_lbs_bwd.comp. Expects the bindings `nodes` (node parameters),
-// `node_out` ([M,10] T, dq, ds, declared as vec2 [M,5]: llvmpipe loops over the lanes once
-// per SSBO access, so two floats a load halve the loops) and `knn`, and the push constants `pc`.
+// nodes_lbs.glsl and nodes_lbs_bwd.glsl with their workgroup size, push constants and first six
+// bindings. `node_out` ([M,10] T, dq, ds) is declared as vec2 [M,5]: llvmpipe loops over the
+// lanes once per SSBO access, so two floats a load halve the loops.
+#extension GL_GOOGLE_include_directive : require
+#include "common.glsl"
+#include "params.glsl"
+#include "raster.glsl"
+#include "nodes.glsl"
+
+layout(local_size_x = 128) in;
+
+layout(push_constant) uniform Push { NodesParams pc; };
+layout(std430, binding = 0) readonly buffer Means { float means[]; };     // [N,3] canonical
+layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };      // [N] canonical
+layout(std430, binding = 2) readonly buffer Nodes { float nodes[]; };     // [4M]
+layout(std430, binding = 3) readonly buffer NodeOut { vec2 node_out[]; }; // [M,10] as [M,5]
+layout(std430, binding = 4) readonly buffer Knn { uint knn[]; };          // [N,K]
+layout(std430, binding = 5) readonly buffer Idx { uint idx[]; };          // [rows] (flags 1)
+
+// This invocation's row r and its Gaussian i (the dynamic Gaussian idx[r] with flags 1);
+// false past the last row.
+bool this_row(out uint r, out uint i) {
+    r = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    i = r;
+    if (r >= pc.n) return false;
+    if ((pc.flags & 1u) != 0u) i = idx[r];
+    return true;
+}
 
 vec3 node_t(uint j) {
     vec2 a = node_out[5 * j], b = node_out[5 * j + 1];

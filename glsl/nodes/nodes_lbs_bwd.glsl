@@ -4,32 +4,16 @@
 // (∂T, ∂dq, ∂ds, ∂p, ∂ρ; summed per node by nodes_gather, no atomics) and to the canonical
 // mean and quaternion, ADDED to their gradients (the composition's backward wrote them).
 // Every path is differentiated, the weights' dependence on μ, p and ρ included.
-#extension GL_GOOGLE_include_directive : require
-#include "common.glsl"
-#include "params.glsl"
-#include "raster.glsl"
-#include "nodes.glsl"
-
-layout(local_size_x = 128) in;
-
-layout(push_constant) uniform Push { NodesParams pc; };
-layout(std430, binding = 0) readonly buffer Means { float means[]; };     // [N,3] canonical
-layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };      // [N] canonical
-layout(std430, binding = 2) readonly buffer Nodes { float nodes[]; };     // [4M]
-layout(std430, binding = 3) readonly buffer NodeOut { vec2 node_out[]; }; // [M,10] as [M,5]
-layout(std430, binding = 4) readonly buffer Knn { uint knn[]; };          // [N,K]
-layout(std430, binding = 5) readonly buffer Idx { uint idx[]; };          // [rows] (flags 1)
+// nodes_blend.glsl brings the includes, the push constants and bindings 0-5.
+#include "nodes_blend.glsl"
 layout(std430, binding = 6) readonly buffer DOut { vec2 g[]; };           // [rows,10] ∂L/∂D as [rows,5]
 layout(std430, binding = 7) writeonly buffer Contrib { vec4 contrib[]; };  // [N,K,4] (CONTRIB_VEC4)
 layout(std430, binding = 8) buffer GMeans { float g_means[]; };           // [N,3] +=
 layout(std430, binding = 9) buffer GQuats { vec4 g_quats[]; };            // [N] +=
 
-#include "nodes_blend.glsl"
-
 void main() {
-    uint r = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    if (r >= pc.n) return;
-    uint i = (pc.flags & 1u) != 0u ? idx[r] : r;
+    uint r, i;
+    if (!this_row(r, i)) return;
     vec3 mu = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
     Blend b = blend_of(i, mu);
     if (b.count == 0) return;
