@@ -558,6 +558,52 @@ fn bands_or_whole_tiles_picked_per_tile() {
         check_grads(&format!("band cover {cover}"), n, &grads, &bg, &pg, true);
         images.push((cover, out));
     }
+
+    // The picked backward (default costs): each tile as the twin decides it from the forward's
+    // stopping points, both ways in this scene, and the twin's gradients.
+    rast.set_band_cover_max(BAND_COVER_MAX);
+    rast.set_blend_bwd_variant(BlendBwdVariant::TilePicked);
+    let (b, out) = render(&gpu, &rast, &cam, &up, &opts);
+    let grads = backward(&gpu, &rast, &b, &cam, &up, &opts, &u);
+    check_grads("picked backward", n, &grads, &bg, &pg, true);
+    let picks = b.band_picks(&gpu).unwrap();
+    let ranges = b.tile_ranges(&gpu).unwrap();
+    let ids = b.intersection_ids(&gpu).unwrap();
+    let splats: Vec<[f32; 4]> = gpu
+        .read(b.splats.elems::<[f32; 4]>(0, 3 * n as u64))
+        .unwrap();
+    let tiles_x = cam.width.div_ceil(16);
+    let c = rast.pick_costs();
+    let mut ways = [0, 0];
+    for (t, r) in ranges.iter().enumerate() {
+        let list = &ids[r[0] as usize..r[1] as usize];
+        let origin = [16 * (t as u32 % tiles_x), 16 * (t as u32 / tiles_x)];
+        let want = twin::bin::band_pick(
+            origin,
+            list,
+            &splats,
+            &out.n_contrib,
+            cam.width,
+            cam.height,
+            BAND_LIST_MAX,
+            [c.band_splat, c.band_step, c.whole_splat],
+        );
+        assert_eq!(
+            picks[t],
+            want as u32,
+            "tile {t} ({} splats): pick",
+            list.len()
+        );
+        ways[want as usize] += (r[1] > r[0]) as usize;
+    }
+    assert!(
+        ways[0] > 0 && ways[1] > 0,
+        "the picked backward sends {} tiles whole and {} to the bands: the scene does not \
+         exercise it",
+        ways[0],
+        ways[1]
+    );
+
     let (_, first) = &images[0];
     for (cover, out) in &images[1..] {
         let same = out.rgba == first.rgba

@@ -230,7 +230,14 @@ struct BlendParams {
     uint band_list_max;  // the longest list the band kernels walk (BAND_LIST_MAX)
     uint band_cover_max; // the bands take a tile when its sampled splats cover at most this
                          // many eighths of a band each, on average (blend_pick.glsl)
-    uint pad;
+    // The picked backward's cost model (blend_bwd_pick.comp), in eighths of one pixel
+    // evaluation per lane: per splat a band evaluates, per splat a band walks, and per splat
+    // of the whole tile's walk.
+    uint pick_band_splat;
+    uint pick_band_step;
+    uint pick_whole_splat;
+    uint pad0;
+    uint pad1;
 };
 
 // src/kernels/loss.rs — photometric loss 0.8·L1 + 0.2·(1 − SSIM) and its gradient.

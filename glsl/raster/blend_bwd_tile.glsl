@@ -15,7 +15,8 @@
 // - bands (PX = 8 and STEP_OVER, blend_bwd_band_f*.comp): 4 rows per subgroup at lavapipe's 8
 //   lanes, stepping over the splats that miss the band's rows; a splat that reaches several
 //   bands is folded and added once per band (so a tile of large splats goes whole:
-//   blend_pick.glsl).
+//   blend_pick.glsl by the forward's cover sample, or blend_bwd_pick.comp by the forward's
+//   stopping points, which the picked variant reads from band_pick).
 // Results differ between shapes only in the order of the float sums. The fold is correct for
 // any grouping of the invocations: lanes fold with the lanes of their subgroup that hold the
 // same splat (a waterfall over distinct ids, one round where the subgroup is one band).
@@ -33,6 +34,14 @@
 layout(local_size_x = WG) in;
 
 #include "blend_bwd_io.glsl"
+// Which kernel draws each tile in the picked backward (BlendParams.pick 3 and 4); the binding
+// after the interface's last (bindings stay dense).
+#if FEAT > 0
+layout(std430, binding = 11) readonly buffer BandPick { uint band_pick[]; };
+#else
+layout(std430, binding = 8) readonly buffer BandPick { uint band_pick[]; };
+#endif
+#define BAND_PICK_BUFFER
 #include "blend_pick.glsl"
 
 void add(uint idx, float v) {
@@ -45,7 +54,7 @@ void main() {
     uint tile = gl_WorkGroupID.y * pc.tiles_x + gl_WorkGroupID.x;
     uvec2 range = ranges[tile];
     // The other kernel of the pass draws this tile (BlendParams.pick).
-    if (!drawn_here(gl_WorkGroupID.y, range)) return;
+    if (!drawn_here(tile, gl_WorkGroupID.y, range)) return;
     uvec2 origin = gl_WorkGroupID.xy * TILE;
     uint S = min(gl_SubgroupSize, uint(WG));
     uint band = t / S, lane = t % S;

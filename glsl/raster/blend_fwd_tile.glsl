@@ -43,7 +43,7 @@ void main() {
     uint tile = gl_WorkGroupID.y * pc.tiles_x + gl_WorkGroupID.x;
     uvec2 range = ranges[tile];
     // The other kernel of the pass draws this tile (BlendParams.pick).
-    if (!drawn_here(gl_WorkGroupID.y, range)) return;
+    if (!drawn_here(tile, gl_WorkGroupID.y, range)) return;
     uvec2 origin = gl_WorkGroupID.xy * TILE;
     // Lanes per band: the subgroup's, at most the workgroup (a power of two dividing WG).
     uint S = min(gl_SubgroupSize, uint(WG));

@@ -8,7 +8,8 @@
 // cover is sampled at BAND_SAMPLE evenly spaced list
 // entries, in bands of 4 rows (lavapipe's shape, whatever the device's subgroup size): a speed
 // choice only, the image is the same either way (forward bit for bit; backward up to the
-// order of float sums). Needs the bindings `ids`, `splats` and the push constants `pc`.
+// order of float sums). Needs the bindings `ids`, `splats` and the push constants `pc` (and
+// `band_pick` where BAND_PICK_BUFFER is defined).
 #define BAND_SAMPLE 32u
 
 bool band_tile(uint tile_y, uvec2 range) {
@@ -30,6 +31,12 @@ bool band_tile(uint tile_y, uvec2 range) {
     return cover * 8u <= pc.band_cover_max * s; // band_cover_max: bands per splat, in eighths
 }
 
-bool drawn_here(uint tile_y, uvec2 range) {
-    return pc.pick == 0u || band_tile(tile_y, range) == (pc.pick == 1u);
+// pick: 0 every tile; 1 / 2 the bands' / the whole tile's share by the cover above; 3 / 4 the
+// same by band_pick (the picked backward's pass, blend_bwd_pick.comp, which binds it).
+bool drawn_here(uint tile, uint tile_y, uvec2 range) {
+    if (pc.pick == 0u) return true;
+#ifdef BAND_PICK_BUFFER
+    if (pc.pick >= 3u) return (band_pick[tile] != 0u) == (pc.pick == 3u);
+#endif
+    return band_tile(tile_y, range) == (pc.pick == 1u);
 }

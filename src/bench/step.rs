@@ -76,10 +76,11 @@ impl KernelSet {
 
 /// The choice before issue 14, the CPU set after it (3σ tile squares), the same kernels
 /// binning each splat to its opacity-aware box (issue 60), the same boxes binned depth first
-/// with the motion magnitude in runs (issue 60), and today's CPU default: that set with the
-/// blends in bands (issue 60) and the control-node blend over 4 slots at K <= 4 (stop 71; the
-/// older sets loop over all 8).
-pub const KERNEL_SETS: [KernelSet; 5] = [
+/// with the motion magnitude in runs (issue 60), that set with the blends in bands (issue 60)
+/// and the control-node blend over 4 slots at K <= 4 (stop 71; the older sets loop over all 8),
+/// and today's CPU default: the same with the blend backward giving each tile to the bands or
+/// the whole-tile kernel by the forward's stopping points (stop 72).
+pub const KERNEL_SETS: [KernelSet; 6] = [
     KernelSet {
         name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
         mlp: "tiled",
@@ -139,6 +140,20 @@ pub const KERNEL_SETS: [KernelSet; 5] = [
         mlp: "rows",
         blend_fwd: "tile-bands",
         blend_bwd: "tile-bands",
+        nodes_gather: "serial",
+        loss_blur: "rows",
+        sort: "serial",
+        splat_extent: "opacity-box",
+        binning: "depth-first",
+        motion_norm: "runs",
+        nodes_slots: "fit",
+    },
+    KernelSet {
+        name: "the same, the blend backward in bands or whole tiles picked per tile from the \
+               forward's stopping points",
+        mlp: "rows",
+        blend_fwd: "tile-bands",
+        blend_bwd: "tile-picked",
         nodes_gather: "serial",
         loss_blur: "rows",
         sort: "serial",
@@ -296,7 +311,7 @@ pub fn make_quarter_transient(tr: &mut Trainer) -> Result<()> {
 /// the splat extent: GPUs bin to the opacity-aware box too).
 pub fn default_set(gpu: &Gpu) -> usize {
     if gpu.info.kind == "CPU" {
-        4
+        5
     } else {
         0
     }
@@ -477,6 +492,24 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
                 "{} {}: with the blends in bands the CPU step is {:.2}× faster than issue 60's \
                  CPU set ({:.2} vs {:.2} ms) and {:.2}× than the same set with whole-tile \
                  blends ({:.2} ms); per zone, whole tiles → bands: {}",
+                r.scene,
+                r.method,
+                a.median_ms / r.median_ms,
+                r.median_ms,
+                a.median_ms,
+                b.median_ms / r.median_ms,
+                b.median_ms,
+                zone_pairs(b, r)
+            );
+        }
+    }
+    let picked = KERNEL_SETS[5].name;
+    for r in rows.iter().filter(|r| r.kernels == picked) {
+        if let (Some(a), Some(b)) = (find(r, issue_set), find(r, bands)) {
+            println!(
+                "{} {}: with the blend backward picked per tile the CPU step is {:.2}× faster \
+                 than issue 60's CPU set ({:.2} vs {:.2} ms) and {:.2}× than the bands alone \
+                 ({:.2} ms); per zone, bands → picked: {}",
                 r.scene,
                 r.method,
                 a.median_ms / r.median_ms,

@@ -188,7 +188,11 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             pick,
             band_list_max,
             band_cover_max,
-            pad
+            pick_band_splat,
+            pick_band_step,
+            pick_whole_splat,
+            pad0,
+            pad1
         ),
         layout!(
             mlp::MlpEncodeParams,

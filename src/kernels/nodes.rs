@@ -311,12 +311,17 @@ impl NodeKernels {
         let (pc, idx) = x.params(rows, idx);
         let binds = [x.means, x.quats, x.nodes, x.node_out, x.knn, idx, out];
         let outer = rec.set_zone("nodes blend");
-        let lbs = match &self.lbs4 {
-            Some((f, _)) if x.k <= 4 => f,
-            _ => &self.lbs,
-        };
-        rec.dispatch_rows(lbs, &pc, &binds, rows);
+        rec.dispatch_rows(self.blend_pipelines(x.k).0, &pc, &binds, rows);
         rec.set_zone(&outer);
+    }
+
+    /// The blend and its backward for `k` slots: the 4-slot pair when it serves `k`
+    /// (`SlotLoop::Fit`), else the 8-slot one.
+    fn blend_pipelines(&self, k: u32) -> (&ComputePipeline, &ComputePipeline) {
+        match &self.lbs4 {
+            Some((f, b)) if k <= 4 => (f, b),
+            _ => (&self.lbs, &self.lbs_bwd),
+        }
     }
 
     /// Backward of [`Self::record_lbs`] from `d_out` [rows,10]: contribution rows, and the
@@ -348,11 +353,7 @@ impl NodeKernels {
             g_quats,
         ];
         let outer = rec.set_zone("nodes blend bwd");
-        let bwd = match &self.lbs4 {
-            Some((_, b)) if x.k <= 4 => b,
-            _ => &self.lbs_bwd,
-        };
-        rec.dispatch_rows(bwd, &pc, &binds, rows);
+        rec.dispatch_rows(self.blend_pipelines(x.k).1, &pc, &binds, rows);
         rec.set_zone(&outer);
     }
 

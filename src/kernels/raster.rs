@@ -145,8 +145,35 @@ pub struct BlendParams {
     /// The bands take a tile when its sampled splats reach at most this many eighths of a
     /// 4-row band each on average ([`BAND_COVER_MAX`]; 32: every short list).
     pub band_cover_max: u32,
-    pub pad: u32,
+    /// The picked backward's cost model ([`PickCosts`]), in eighths of one pixel evaluation.
+    pub pick_band_splat: u32,
+    pub pick_band_step: u32,
+    pub pick_whole_splat: u32,
+    pub pad0: u32,
+    pub pad1: u32,
 }
+
+/// The cost model of the picked blend backward ([`BlendBwdVariant::TilePicked`],
+/// `blend_bwd_pick.comp`), in eighths of one pixel evaluation per lane: a band kernel pays
+/// `band_splat` for each splat that reaches its rows (8 pixels per lane and one fold) and
+/// `band_step` for each splat it walks; the whole-tile kernel pays `whole_splat` for each
+/// splat of its walk (32 pixels per lane and one fold). A tile goes to the cheaper.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PickCosts {
+    pub band_splat: u32,
+    pub band_step: u32,
+    pub whole_splat: u32,
+}
+
+/// The default, fitted on lavapipe to the difference between the two kernels' times over
+/// 14 measured scene states (docs/measurements.md, "The blend backward picks per tile"): a
+/// splat of a band's walk costs about a sixth of one it evaluates, one of the whole tile's
+/// about 2.4 of them.
+pub const PICK_COSTS: PickCosts = PickCosts {
+    band_splat: 88,
+    band_step: 14,
+    whole_splat: 213,
+};
 
 /// The longest tile list the band blends walk: each splat of a list costs them up to two loop
 /// iterations (the step-over loop's and the walk's), and lavapipe ends an invocation's loops
@@ -281,6 +308,8 @@ pub struct RasterBuffers {
     sort: SortBuffers,
     depth_first: DepthFirstBuffers,
     ranges: Buffer,
+    /// [tiles] u32: 1 where the picked blend backward gives the tile to the bands.
+    band_pick: Buffer,
     /// [H·W] vec4: rgb (background included) and alpha = 1 − T.
     pub out_rgba: Buffer,
     /// [H·W] Σ w_i z_i (not normalised by alpha).
@@ -348,6 +377,13 @@ impl RasterBuffers {
         let m = self.intersections(gpu)?.min(self.isect_capacity);
         let out = isect_out(self.width, self.height);
         gpu.read(self.sort.vals[out].elems::<u32>(0, m as u64))
+    }
+
+    /// Per tile, whether the last picked blend backward gave it to the bands (1) or the whole
+    /// tile (0) (tests).
+    pub fn band_picks(&self, gpu: &Gpu) -> Result<Vec<u32>> {
+        let (tx, ty) = (self.width.div_ceil(TILE), self.height.div_ceil(TILE));
+        gpu.read(self.band_pick.elems::<u32>(0, tx as u64 * ty as u64))
     }
 
     /// The overflow word of the last forward (bits `OVERFLOW_*`: non-zero when its render must
@@ -421,29 +457,47 @@ pub enum BlendBwdVariant {
     /// splats that miss its rows; per splat, the terms are summed over the band
     /// (`blend_bwd_band_f*.comp`: `blend_bwd_tile.glsl` with `STEP_OVER`). CPU-shaped.
     TileBands,
+    /// `TileBands` and `TileAccum` sharing the tiles by a pass that reads the forward's
+    /// stopping points (`blend_bwd_pick.comp`, [`PickCosts`]): a tile goes to the bands when
+    /// their walks and folds cost less than the whole tile's. CPU-shaped.
+    TilePicked,
 }
 
 impl BlendBwdVariant {
-    pub const ALL: [BlendBwdVariant; 3] = [
+    pub const ALL: [BlendBwdVariant; 4] = [
         BlendBwdVariant::SubgroupAtomic,
         BlendBwdVariant::TileAccum,
         BlendBwdVariant::TileBands,
+        BlendBwdVariant::TilePicked,
     ];
+
+    /// The pipelines (indices of `Rasterizer::blend_bwd`) and picks a pass dispatches: the
+    /// variant's kernel over every tile, or the band kernel and the whole-tile kernel over the
+    /// tiles each takes (`blend_pick.glsl`: `BlendParams::pick`).
+    fn dispatches(self) -> &'static [(usize, u32)] {
+        match self {
+            BlendBwdVariant::SubgroupAtomic => &[(0, 0)],
+            BlendBwdVariant::TileAccum => &[(1, 0)],
+            BlendBwdVariant::TileBands => &[(2, 1), (1, 2)],
+            BlendBwdVariant::TilePicked => &[(2, 3), (1, 4)],
+        }
+    }
 }
 
-/// The default for a device: bands on CPU devices (lavapipe: 1.6–1.8× the per-tile
-/// accumulation on the issue-14 scenes and on a trained model's step, which was itself 10–14×
-/// the subgroup kernel, `bench --suite raster`; docs/measurements.md, "Blends in bands"), with
-/// `TileAccum` drawing the tiles whose list is longer than [`BAND_LIST_MAX`] (and, with
-/// `DISPFLOW_BAND_COVER` below 32, those whose splats span most of their bands); the subgroup
+/// The default for a device: bands or whole tiles picked per tile on CPU devices (the bands
+/// alone: 1.6–1.8× the per-tile accumulation on the issue-14 scenes and on a trained model's
+/// step, which was itself 10–14× the subgroup kernel, `bench --suite raster`;
+/// docs/measurements.md, "Blends in bands"; the pick wins back the whole tiles where splats
+/// span every band, "The backward picks per tile"), with `TileAccum` drawing the tiles whose
+/// list is longer than [`BAND_LIST_MAX`]; the subgroup
 /// kernel on GPUs, where a few invocations per tile leave most of a warp idle (the whole
 /// CPU-shaped step measured 6.8–7.9× slower on an H200, docs/gpu_h200.md).
-/// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum|tile-bands` overrides the choice (benches,
-/// tests).
+/// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum|tile-bands|tile-picked` overrides the choice
+/// (benches, tests).
 impl DeviceShape for BlendBwdVariant {
     const ENV: &'static str = "DISPFLOW_BLEND_BWD";
     const ALL: &'static [Self] = &BlendBwdVariant::ALL;
-    const CPU: Self = BlendBwdVariant::TileBands;
+    const CPU: Self = BlendBwdVariant::TilePicked;
     const GPU: Self = BlendBwdVariant::SubgroupAtomic;
 
     fn name(self) -> &'static str {
@@ -451,6 +505,7 @@ impl DeviceShape for BlendBwdVariant {
             BlendBwdVariant::SubgroupAtomic => "subgroup-atomic",
             BlendBwdVariant::TileAccum => "tile-accum",
             BlendBwdVariant::TileBands => "tile-bands",
+            BlendBwdVariant::TilePicked => "tile-picked",
         }
     }
 }
@@ -544,9 +599,11 @@ pub struct Rasterizer {
     /// Per variant (its discriminant), per feature count.
     blend_fwd: [[ComputePipeline; 4]; 3],
     blend_fwd_variant: BlendFwdVariant,
-    /// Per variant (its discriminant), per feature count.
+    /// Per kernel (`BlendBwdVariant::dispatches`), per feature count.
     blend_bwd: [[ComputePipeline; 4]; 3],
     blend_bwd_variant: BlendBwdVariant,
+    blend_bwd_pick: ComputePipeline,
+    pick_costs: PickCosts,
     project_bwd: ComputePipeline,
     splat_extent: SplatExtent,
     binning: Binning,
@@ -628,6 +685,8 @@ impl Rasterizer {
                 ],
             ],
             blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
+            blend_bwd_pick: gpu.pipeline(&r::BLEND_BWD_PICK)?,
+            pick_costs: PICK_COSTS,
             project_bwd: gpu.pipeline(&r::PROJECT_BWD)?,
             splat_extent: SplatExtent::for_device(&gpu.info),
             binning: Binning::for_device(&gpu.info),
@@ -679,6 +738,16 @@ impl Rasterizer {
     /// benches compare the picks on one device.
     pub fn set_band_cover_max(&mut self, c: u32) {
         self.band_cover_max = c.min(32);
+    }
+
+    /// The picked backward's cost model ([`PICK_COSTS`] unless set).
+    pub fn pick_costs(&self) -> PickCosts {
+        self.pick_costs
+    }
+
+    /// Chooses the picked backward's cost model (tests and benches split tiles with it).
+    pub fn set_pick_costs(&mut self, c: PickCosts) {
+        self.pick_costs = c;
     }
 
     /// How `forward` bins splats to tiles.
@@ -734,6 +803,7 @@ impl Rasterizer {
             )?,
             depth_first: self.depth_first.buffers(gpu, &self.sort, max_gaussians)?,
             ranges: gpu.buffer("raster tile ranges", tiles * 8)?,
+            band_pick: gpu.buffer("raster band picks", tiles * 4)?,
             out_rgba: gpu.buffer("raster out rgba", px * 16)?,
             out_depth: gpu.buffer("raster out depth", px * f)?,
             final_t: gpu.buffer("raster final T", px * f)?,
@@ -827,7 +897,11 @@ impl Rasterizer {
             pick: 0,
             band_list_max: BAND_LIST_MAX,
             band_cover_max: self.band_cover_max,
-            pad: 0,
+            pick_band_splat: self.pick_costs.band_splat,
+            pick_band_step: self.pick_costs.band_step,
+            pick_whole_splat: self.pick_costs.whole_splat,
+            pad0: 0,
+            pad1: 0,
         }
     }
 
@@ -1100,16 +1174,28 @@ impl Rasterizer {
             binds.extend([f, df, b.d_features.all()]);
         }
         let v = self.blend_bwd_variant;
-        let ds = Self::blend_dispatches(
-            v == BlendBwdVariant::TileBands,
-            v as usize,
-            BlendBwdVariant::TileAccum as usize,
-            &bp,
-        );
-        for (k, p) in ds {
+        if v != BlendBwdVariant::SubgroupAtomic {
+            // The CPU-shaped kernels read which of them draws each tile (blend_pick.glsl).
+            binds.push(b.band_pick.all());
+        }
+        if v == BlendBwdVariant::TilePicked {
+            rec.dispatch_threads(
+                &self.blend_bwd_pick,
+                &bp,
+                &[
+                    b.ranges.all(),
+                    b.sort.vals[out].all(),
+                    b.splats.all(),
+                    b.n_contrib.all(),
+                    b.band_pick.all(),
+                ],
+                [tx * ty, 1, 1],
+            );
+        }
+        for &(k, pick) in v.dispatches() {
             rec.dispatch(
                 &self.blend_bwd[k][variant(g.feature_dims()).unwrap()],
-                &p,
+                &BlendParams { pick, ..bp },
                 &binds,
                 [tx.max(1), ty.max(1), 1],
             );

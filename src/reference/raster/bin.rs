@@ -209,6 +209,54 @@ pub fn band_tile(
     cover * 8 <= band_cover_max * s
 }
 
+/// `blend_bwd_pick.comp`: whether the picked blend backward gives the tile at `origin` (its
+/// top-left pixel) with list `ids` (front to back) to the band kernels (rather than the
+/// whole-tile one), from the forward's `n_contrib` (`[H·W]`, 1-based last contributor) on a
+/// `width`×`height` image, the splat records `splats` (as [`band_tile`]) and the cost model
+/// `costs` (`[band_splat, band_step, whole_splat]`, eighths of a pixel evaluation): per 4-row
+/// band, the walk to its furthest last contributor and the splats of that walk that reach its
+/// rows, against the whole tile's walk to the furthest of all. Exact: the same f32
+/// comparisons and integer sums.
+#[allow(clippy::too_many_arguments)]
+pub fn band_pick(
+    origin: [u32; 2],
+    ids: &[u32],
+    splats: &[[f32; 4]],
+    n_contrib: &[u32],
+    width: u32,
+    height: u32,
+    band_list_max: u32,
+    costs: [u32; 3],
+) -> bool {
+    let tile = super::TILE;
+    if ids.len() as u32 > band_list_max {
+        return false;
+    }
+    let mut end = [0u32; 4];
+    for r in 0..tile {
+        let y = origin[1] + r;
+        if y >= height {
+            break;
+        }
+        for c in (0..tile).take_while(|c| origin[0] + c < width) {
+            let p = (y * width + origin[0] + c) as usize;
+            end[(r / 4) as usize] = end[(r / 4) as usize].max(n_contrib[p]);
+        }
+    }
+    let longest = *end.iter().max().unwrap();
+    let mut reached = [0u32; 4];
+    for (j, &gid) in ids.iter().enumerate().take(longest as usize) {
+        let (y, reach) = (splats[3 * gid as usize][1], splats[3 * gid as usize + 2][3]);
+        for b in 0..4 {
+            let lo = origin[1] as f32 + (4 * b) as f32 + 0.5;
+            let hi = lo + 3.0;
+            reached[b] += (y + reach >= lo && y - reach <= hi && (j as u32) < end[b]) as u32;
+        }
+    }
+    let bands = reached.iter().sum::<u32>() * costs[0] + end.iter().sum::<u32>() * costs[1];
+    bands <= longest * costs[2]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
