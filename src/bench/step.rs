@@ -74,6 +74,48 @@ impl KernelSet {
     }
 }
 
+/// Issue 60's CPU set: the CPU kernels after issue 14, splats binned to their 3σ squares.
+const ISSUE_60: KernelSet = KernelSet {
+    name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather + rows \
+           blur + serial sort, 3σ tile squares",
+    mlp: "rows",
+    blend_fwd: "tile-regs",
+    blend_bwd: "tile-accum",
+    nodes_gather: "serial",
+    loss_blur: "rows",
+    sort: "serial",
+    splat_extent: "radius",
+    binning: "radix",
+    motion_norm: "tree",
+    nodes_slots: "max",
+};
+
+/// The same kernels binning each splat to its opacity-aware box.
+const BOXES: KernelSet = KernelSet {
+    name: "the same CPU kernels, opacity-aware tile boxes",
+    splat_extent: "opacity-box",
+    ..ISSUE_60
+};
+
+/// The whole-tile CPU kernels binned depth first (stops 63–66's default).
+const DEPTH_FIRST: KernelSet = KernelSet {
+    name: "the same CPU kernels, opacity-aware tile boxes, depth-first binning, motion \
+           magnitude in runs",
+    binning: "depth-first",
+    motion_norm: "runs",
+    ..BOXES
+};
+
+/// Stop 67–71's CPU default: [`DEPTH_FIRST`] with the blends in bands of rows and the
+/// control-node blend over 4 slots.
+const BANDS: KernelSet = KernelSet {
+    name: "the same, blends in bands of rows stepping over the splats that miss them",
+    blend_fwd: "tile-bands",
+    blend_bwd: "tile-bands",
+    nodes_slots: "fit",
+    ..DEPTH_FIRST
+};
+
 /// The choice before issue 14, the CPU set after it (3σ tile squares), the same kernels
 /// binning each splat to its opacity-aware box (issue 60), the same boxes binned depth first
 /// with the motion magnitude in runs (issue 60), that set with the blends in bands (issue 60)
@@ -94,73 +136,15 @@ pub const KERNEL_SETS: [KernelSet; 6] = [
         motion_norm: "tree",
         nodes_slots: "max",
     },
-    KernelSet {
-        name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather + rows \
-               blur + serial sort, 3σ tile squares",
-        mlp: "rows",
-        blend_fwd: "tile-regs",
-        blend_bwd: "tile-accum",
-        nodes_gather: "serial",
-        loss_blur: "rows",
-        sort: "serial",
-        splat_extent: "radius",
-        binning: "radix",
-        motion_norm: "tree",
-        nodes_slots: "max",
-    },
-    KernelSet {
-        name: "the same CPU kernels, opacity-aware tile boxes",
-        mlp: "rows",
-        blend_fwd: "tile-regs",
-        blend_bwd: "tile-accum",
-        nodes_gather: "serial",
-        loss_blur: "rows",
-        sort: "serial",
-        splat_extent: "opacity-box",
-        binning: "radix",
-        motion_norm: "tree",
-        nodes_slots: "max",
-    },
-    KernelSet {
-        name: "the same CPU kernels, opacity-aware tile boxes, depth-first binning, motion \
-               magnitude in runs",
-        mlp: "rows",
-        blend_fwd: "tile-regs",
-        blend_bwd: "tile-accum",
-        nodes_gather: "serial",
-        loss_blur: "rows",
-        sort: "serial",
-        splat_extent: "opacity-box",
-        binning: "depth-first",
-        motion_norm: "runs",
-        nodes_slots: "max",
-    },
-    KernelSet {
-        name: "the same, blends in bands of rows stepping over the splats that miss them",
-        mlp: "rows",
-        blend_fwd: "tile-bands",
-        blend_bwd: "tile-bands",
-        nodes_gather: "serial",
-        loss_blur: "rows",
-        sort: "serial",
-        splat_extent: "opacity-box",
-        binning: "depth-first",
-        motion_norm: "runs",
-        nodes_slots: "fit",
-    },
+    ISSUE_60,
+    BOXES,
+    DEPTH_FIRST,
+    BANDS,
     KernelSet {
         name: "the same, the blend backward in bands or whole tiles picked per tile from the \
                forward's stopping points",
-        mlp: "rows",
-        blend_fwd: "tile-bands",
         blend_bwd: "tile-picked",
-        nodes_gather: "serial",
-        loss_blur: "rows",
-        sort: "serial",
-        splat_extent: "opacity-box",
-        binning: "depth-first",
-        motion_norm: "runs",
-        nodes_slots: "fit",
+        ..BANDS
     },
 ];
 
@@ -485,40 +469,40 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
             );
         }
     }
-    let (issue_set, bands) = (KERNEL_SETS[1].name, KERNEL_SETS[4].name);
-    for r in rows.iter().filter(|r| r.kernels == bands) {
-        if let (Some(a), Some(b)) = (find(r, issue_set), find(r, depth_first)) {
-            println!(
-                "{} {}: with the blends in bands the CPU step is {:.2}× faster than issue 60's \
-                 CPU set ({:.2} vs {:.2} ms) and {:.2}× than the same set with whole-tile \
-                 blends ({:.2} ms); per zone, whole tiles → bands: {}",
-                r.scene,
-                r.method,
-                a.median_ms / r.median_ms,
-                r.median_ms,
-                a.median_ms,
-                b.median_ms / r.median_ms,
-                b.median_ms,
-                zone_pairs(b, r)
-            );
-        }
-    }
-    let picked = KERNEL_SETS[5].name;
-    for r in rows.iter().filter(|r| r.kernels == picked) {
-        if let (Some(a), Some(b)) = (find(r, issue_set), find(r, bands)) {
-            println!(
-                "{} {}: with the blend backward picked per tile the CPU step is {:.2}× faster \
-                 than issue 60's CPU set ({:.2} vs {:.2} ms) and {:.2}× than the bands alone \
-                 ({:.2} ms); per zone, bands → picked: {}",
-                r.scene,
-                r.method,
-                a.median_ms / r.median_ms,
-                r.median_ms,
-                a.median_ms,
-                b.median_ms / r.median_ms,
-                b.median_ms,
-                zone_pairs(b, r)
-            );
+    // Each later CPU set against the issue's and against the set it changes.
+    let issue_set = KERNEL_SETS[1].name;
+    let (bands, picked) = (KERNEL_SETS[4].name, KERNEL_SETS[5].name);
+    for (set, prev, what, prev_what, change) in [
+        (
+            bands,
+            depth_first,
+            "with the blends in bands",
+            "the same set with whole-tile blends",
+            "whole tiles → bands",
+        ),
+        (
+            picked,
+            bands,
+            "with the blend backward picked per tile",
+            "the bands alone",
+            "bands → picked",
+        ),
+    ] {
+        for r in rows.iter().filter(|r| r.kernels == set) {
+            if let (Some(a), Some(b)) = (find(r, issue_set), find(r, prev)) {
+                println!(
+                    "{} {}: {what} the CPU step is {:.2}× faster than issue 60's CPU set ({:.2} \
+                     vs {:.2} ms) and {:.2}× than {prev_what} ({:.2} ms); per zone, {change}: {}",
+                    r.scene,
+                    r.method,
+                    a.median_ms / r.median_ms,
+                    r.median_ms,
+                    a.median_ms,
+                    b.median_ms / r.median_ms,
+                    b.median_ms,
+                    zone_pairs(b, r)
+                );
+            }
         }
     }
     for r in rows.iter().filter(|r| r.kernels == TRANSIENT_ROW) {
