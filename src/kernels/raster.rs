@@ -534,6 +534,15 @@ impl BlendFwdVariant {
         BlendFwdVariant::TileRegs,
         BlendFwdVariant::TileBands,
     ];
+
+    /// As [`BlendBwdVariant::dispatches`], for `Rasterizer::blend_fwd`.
+    fn dispatches(self) -> &'static [(usize, u32)] {
+        match self {
+            BlendFwdVariant::Shared => &[(0, 0)],
+            BlendFwdVariant::TileRegs => &[(1, 0)],
+            BlendFwdVariant::TileBands => &[(2, 1), (1, 2)],
+        }
+    }
 }
 
 /// The default for a device: pixels in registers, in bands, on CPU devices (lavapipe, `bench
@@ -905,23 +914,6 @@ impl Rasterizer {
         }
     }
 
-    /// The dispatches of a blend variant: the variant over every tile, or the band kernel over
-    /// the tiles it takes and the whole-tile kernel (`whole`) over the rest (`blend_pick.glsl`).
-    fn blend_dispatches(
-        bands: bool,
-        own: usize,
-        whole: usize,
-        bp: &BlendParams,
-    ) -> Vec<(usize, BlendParams)> {
-        if !bands {
-            return vec![(own, *bp)];
-        }
-        vec![
-            (own, BlendParams { pick: 1, ..*bp }),
-            (whole, BlendParams { pick: 2, ..*bp }),
-        ]
-    }
-
     /// Records the forward pass into `b.out_*`.
     pub fn forward(
         &self,
@@ -1001,17 +993,10 @@ impl Rasterizer {
             binds.extend([f, b.out_features.all()]);
         }
         binds.push(b.meta.slice(256, 4));
-        let v = self.blend_fwd_variant;
-        let ds = Self::blend_dispatches(
-            v == BlendFwdVariant::TileBands,
-            v as usize,
-            BlendFwdVariant::TileRegs as usize,
-            &bp,
-        );
-        for (k, p) in ds {
+        for &(k, pick) in self.blend_fwd_variant.dispatches() {
             rec.dispatch(
                 &self.blend_fwd[k][variant(g.feature_dims()).unwrap()],
-                &p,
+                &BlendParams { pick, ..bp },
                 &binds,
                 [tx.max(1), ty.max(1), 1],
             );
