@@ -12,6 +12,10 @@
 #define SORT_ITEMS 8
 #define SORT_BLOCK 2048
 #define SORT_RADIX 16
+// The serial shape: one invocation per 256-key block, 8 invocations (lavapipe's SIMD lanes at
+// 256 bits) per workgroup, so the lanes of one subgroup walk 8 blocks at once.
+#define SORT_SERIAL_BLOCK 256
+#define SORT_SERIAL_LANES 8
 
 // Deformation composition (glsl/deform): the drawn scale is exp(min(log_scale, LOG_SCALE_MAX))
 // + ds and the log-scale gets no gradient above the clamp. f32 exp overflows from 88.72 on; 44

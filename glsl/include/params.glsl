@@ -16,6 +16,8 @@ struct SortParams {
     uint capacity;   // key capacity (the count is clamped to it)
     uint shift;      // bit offset of this pass's 4-bit digit
     uint digit_mask; // mask applied to the digit (ignores key bits at or above `bits`)
+    uint block_keys; // keys per block (SORT_BLOCK, or SORT_SERIAL_BLOCK for the serial shape)
+    uint group_blocks; // blocks per workgroup (1, or SORT_SERIAL_LANES: one per invocation)
     uint pad;
 };
 

@@ -146,7 +146,15 @@ pub fn param_layouts() -> Vec<ParamLayout> {
             mix
         ),
         layout!(scan::ScanParams, capacity, level, num_levels, pad),
-        layout!(radix_sort::SortParams, capacity, shift, digit_mask, pad),
+        layout!(
+            radix_sort::SortParams,
+            capacity,
+            shift,
+            digit_mask,
+            block_keys,
+            group_blocks,
+            pad
+        ),
         layout!(
             binning::BinParams,
             tiles_x,

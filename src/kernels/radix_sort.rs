@@ -3,7 +3,7 @@
 //!
 //! 4-bit digits, least significant first, `ceil(bits / 4)` passes over the low `bits` bits of
 //! the key (the rasteriser sorts only `tile_bits + depth_bits`). Per pass: `radix_hist` (digit
-//! histogram per 2048-key block, digit-major) → exclusive scan of the histogram → `radix_scatter`
+//! histogram per block of keys, digit-major) → exclusive scan of the histogram → `radix_scatter`
 //! (stable rank within the block). The key count may live on the GPU; every per-pass dispatch is
 //! indirect on the block count computed by `sort_setup`. Two shapes of `radix_hist` and
 //! `radix_scatter` ([`SortShape`]) give the same output.
@@ -16,8 +16,12 @@ use crate::error::{Error, Result};
 use crate::shaders;
 use crate::vk::{Buffer, ComputePipeline, Gpu, Recorder};
 
-/// Keys per block (mirrors `SORT_BLOCK` in glsl/include/common.glsl).
+/// Keys per block of the block shape (mirrors `SORT_BLOCK` in glsl/include/common.glsl).
 pub const SORT_BLOCK: u32 = 2048;
+/// Keys per block of the serial shape, and its blocks per workgroup (mirror
+/// `SORT_SERIAL_BLOCK` and `SORT_SERIAL_LANES`).
+pub const SORT_SERIAL_BLOCK: u32 = 256;
+pub const SORT_SERIAL_LANES: u32 = 8;
 /// Bits per pass (16 digits).
 pub const RADIX_BITS: u32 = 4;
 
@@ -28,6 +32,10 @@ pub struct SortParams {
     pub capacity: u32,
     pub shift: u32,
     pub digit_mask: u32,
+    /// Keys per block ([`SortShape::block_keys`]).
+    pub block_keys: u32,
+    /// Blocks per workgroup ([`SortShape::group_blocks`]).
+    pub group_blocks: u32,
     pub pad: u32,
 }
 
@@ -61,6 +69,25 @@ pub enum SortShape {
 }
 
 /// Serial on CPU devices, blocks elsewhere (`DISPFLOW_SORT=block|serial` overrides).
+impl SortShape {
+    /// Keys per block: a workgroup's 256 invocations share a 2048-key block, or one invocation
+    /// walks a 256-key block alone.
+    pub fn block_keys(self) -> u32 {
+        match self {
+            SortShape::Block => SORT_BLOCK,
+            SortShape::Serial => SORT_SERIAL_BLOCK,
+        }
+    }
+
+    /// Blocks per workgroup.
+    pub fn group_blocks(self) -> u32 {
+        match self {
+            SortShape::Block => 1,
+            SortShape::Serial => SORT_SERIAL_LANES,
+        }
+    }
+}
+
 impl DeviceShape for SortShape {
     const ENV: &'static str = "DISPFLOW_SORT";
     const ALL: &'static [Self] = &[SortShape::Block, SortShape::Serial];
@@ -147,11 +174,12 @@ impl RadixSort {
         width: KeyWidth,
     ) -> Result<SortBuffers> {
         let max_groups = gpu.info.max_workgroup_count[0] as u64;
-        let blocks = capacity.div_ceil(SORT_BLOCK);
-        if blocks as u64 > max_groups {
+        let blocks = capacity.div_ceil(self.shape.block_keys());
+        let per_group = (self.shape.block_keys() * self.shape.group_blocks()) as u64;
+        if blocks.div_ceil(self.shape.group_blocks()) as u64 > max_groups {
             return Err(Error::Capacity {
-                what: "radix sort (blocks of 2048 keys per workgroup)",
-                capacity: max_groups * SORT_BLOCK as u64,
+                what: "radix sort (blocks of keys per workgroup)",
+                capacity: max_groups * per_group,
                 asked: capacity as u64,
             });
         }
@@ -238,11 +266,13 @@ impl RadixSort {
                 capacity: b.capacity,
                 shift,
                 digit_mask,
+                block_keys: self.shape.block_keys(),
+                group_blocks: self.shape.group_blocks(),
                 pad: 0,
             }
         };
         rec.dispatch(&self.setup, &pc(0), &[count, b.meta.all()], [1, 1, 1]);
-        let args = b.meta.slice(4, 12);
+        let args = b.meta.slice(16, 12);
         let hist_len = b.meta.slice(META_HIST_LEN, 4);
         for p in 0..passes(bits - lo) {
             let (src, dst) = ((p % 2) as usize, ((p + 1) % 2) as usize);
