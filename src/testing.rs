@@ -347,13 +347,22 @@ pub fn rerun_at_subgroup_sizes(this_test: &str) {
     }
     let exe = std::env::current_exe().expect("the test binary's path");
     // Both re-runs at once: a kernel test's CPU twins and serial stretches leave a core idle.
+    // Each width keeps its own compiled-shader cache: Mesa 22.3's key leaves the vector width
+    // out, so a shader compiled at one width was run at another (the re-runs then tested the
+    // default width's code, and the default run could pick up a re-run's).
+    let cache = mesa_cache_dir();
     let rerun = |bits: u32| {
-        std::process::Command::new(&exe)
-            .args(["--skip", this_test, "--nocapture"])
+        let mut cmd = std::process::Command::new(&exe);
+        cmd.args(["--skip", this_test, "--nocapture"])
             .env("LP_NATIVE_VECTOR_WIDTH", bits.to_string())
-            .env("DISPFLOW_SUBGROUP_RERUN", "1")
-            .output()
-            .expect("re-run the test binary")
+            .env("DISPFLOW_SUBGROUP_RERUN", "1");
+        if let Some(dir) = &cache {
+            cmd.env(
+                "MESA_SHADER_CACHE_DIR",
+                dir.join(format!("dispflow-lanes-{bits}")),
+            );
+        }
+        cmd.output().expect("re-run the test binary")
     };
     let outs = std::thread::scope(|sc| {
         let wide = sc.spawn(|| rerun(1024));
@@ -387,6 +396,15 @@ pub fn rerun_at_subgroup_sizes(this_test: &str) {
     }
 }
 
+/// The directory Mesa keeps its compiled-shader cache under (`MESA_SHADER_CACHE_DIR`, else
+/// `$XDG_CACHE_HOME`, else `~/.cache`; Mesa adds `mesa_shader_cache`).
+fn mesa_cache_dir() -> Option<PathBuf> {
+    std::env::var_os("MESA_SHADER_CACHE_DIR")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("XDG_CACHE_HOME").map(PathBuf::from))
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+}
+
 /// Points a child `dispflow-vk` at a fresh home and cache under `root` (a test never reads or
 /// writes the user's built-in scene or LPIPS weights), while the driver's compiled-shader cache
 /// stays the one this process uses: Mesa keeps it under `$XDG_CACHE_HOME` too, and a cold one
@@ -396,10 +414,7 @@ pub fn isolated_home<'a>(
     cmd: &'a mut std::process::Command,
     root: &Path,
 ) -> &'a mut std::process::Command {
-    let shared = std::env::var_os("MESA_SHADER_CACHE_DIR")
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("XDG_CACHE_HOME").map(PathBuf::from))
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")));
+    let shared = mesa_cache_dir();
     cmd.env("HOME", root.join("home"))
         .env("XDG_CACHE_HOME", root.join("cache"));
     if let Some(dir) = shared {

@@ -11,19 +11,26 @@
 // - whole tile (PX = 32, blend_bwd_tile_f*.comp): one lavapipe coroutine per tile; the
 //   subgroup kernel pays, per splat and tile, one subgroupAdd and one float atomic per
 //   component for each of its 32 coroutines and stages splats behind barriers: 11–18× slower
-//   on the issue-14 scenes.
+//   on the issue-14 scenes. It loads S list entries at a time back to front (lane l the entry
+//   jb − 1 − l), shuffles each record to the tile, keeps each splat's folded sums in the lane
+//   that loaded it and adds them to memory once per batch (per-lane loads and atomics are
+//   loops over the lanes on llvmpipe: one per batch instead of one per splat; stop 74). Per
+//   address the adds come in the order one add per splat gave them.
 // - bands (PX = 8 and STEP_OVER, blend_bwd_band_f*.comp): 4 rows per subgroup at lavapipe's 8
 //   lanes, stepping over the splats that miss the band's rows; a splat that reaches several
 //   bands is folded and added once per band (so a tile of large splats goes whole:
 //   blend_pick.glsl by the forward's cover sample, or blend_bwd_pick.comp by the forward's
 //   stopping points, which the picked variant reads from band_pick).
-// Results differ between shapes only in the order of the float sums. The fold is correct for
-// any grouping of the invocations: lanes fold with the lanes of their subgroup that hold the
-// same splat (a waterfall over distinct ids, one round where the subgroup is one band).
+// Results differ between shapes only in the order of the float sums. The bands' fold is
+// correct for any grouping of the invocations: lanes fold with the lanes of their subgroup
+// that hold the same splat (a waterfall over distinct ids, one round where the subgroup is one
+// band). The whole tile's batches take lane t % S to be gl_SubgroupInvocationID's
+// (consecutive invocations, lavapipe's layout).
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_shuffle : require
 #extension GL_KHR_shader_subgroup_vote : require
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
@@ -47,6 +54,17 @@ layout(std430, binding = 8) readonly buffer BandPick { uint band_pick[]; };
 void add(uint idx, float v) {
     float s = subgroupAdd(v);
     if (subgroupElect() && s != 0.0) atomicAdd(grad2d[idx], s);
+}
+
+// The band's sum of v, kept by lane k (the lane that loaded the splat).
+void fold(inout float acc, float v, uint lane, uint k) {
+    float s = subgroupAdd(v);
+    if (lane == k) acc = s;
+}
+
+// One lane's folded sum into memory (a zero sum adds nothing: skipped, as before).
+void flush(uint idx, float s) {
+    if (s != 0.0) atomicAdd(grad2d[idx], s);
 }
 
 void main() {
@@ -95,8 +113,8 @@ void main() {
     // subgroup is wider than a band).
     uint end = range.x + subgroupMax(max_last);
 
-    for (uint j = end; j > range.x;) {
 #ifdef STEP_OVER
+    for (uint j = end; j > range.x;) {
         // Step over the splats that reach no row of the band.
         uint gid = 0u;
         vec4 a = vec4(0.0), c4 = vec4(0.0);
@@ -112,12 +130,6 @@ void main() {
             }
         }
         if (!found) break;
-#else
-        --j;
-        uint gid = ids[j]; // uniform: broadcast loads below
-        vec4 a = splats[SPLAT_STRIDE * gid];
-        vec4 c4 = splats[SPLAT_STRIDE * gid + 2];
-#endif
         uint rel = j - range.x; // 0-based position in the tile's list
         vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
         vec3 col = c4.rgb;
@@ -127,48 +139,7 @@ void main() {
         float gfe[FEAT];
         for (int c = 0; c < FEAT; ++c) gfe[c] = 0.0;
 #endif
-        vec2 g_mean = vec2(0.0), g_abs = vec2(0.0);
-        vec3 g_con = vec3(0.0), g_col = vec3(0.0);
-        float g_op = 0.0, g_z = 0.0, g_op_f = 0.0;
-        bool any_live = false;
-        for (int i = 0; i < PX; ++i) {
-            uint q = first + lane + S * uint(i);
-            vec2 d = a.xy - (vec2(origin + uvec2(q % TILE, q / TILE)) + 0.5);
-            float sigma = splat_sigma(con, d);
-            float g = a.w * exp(-sigma);
-            float alpha = min(pc.alpha_max, g);
-            if (rel < last[i] && alpha >= ALPHA_MIN) {
-                any_live = true;
-                float Ti = T[i] / (1.0 - alpha);
-                float w = alpha * Ti;
-                vec4 go = g_out[i];
-                g_col += w * go.rgb;
-                g_z += w * g_depth[i];
-                float g_alpha = Ti * (dot(go.rgb, col - R_rgb[i]) + go.a * (1.0 - R_a[i]) + g_depth[i] * (a.z - R_d[i]));
-                R_rgb[i] = col * alpha + (1.0 - alpha) * R_rgb[i];
-                R_a[i] = alpha + (1.0 - alpha) * R_a[i];
-                R_d[i] = a.z * alpha + (1.0 - alpha) * R_d[i];
-                float g_alpha_f = 0.0; // the feature channels' share of g_alpha
-#if FEAT > 0
-                for (int c = 0; c < FEAT; ++c) {
-                    gfe[c] += w * g_f[i * FEAT + c];
-                    g_alpha_f += Ti * g_f[i * FEAT + c] * (f[c] - R_f[i * FEAT + c]);
-                    R_f[i * FEAT + c] = f[c] * alpha + (1.0 - alpha) * R_f[i * FEAT + c];
-                }
-                g_alpha += g_alpha_f;
-#endif
-                T[i] = Ti;
-                if (g < pc.alpha_max) { // unclamped: α = opacity · exp(−σ)
-                    g_op += g_alpha * exp(-sigma);
-                    g_op_f += g_alpha_f * exp(-sigma);
-                    float g_sigma = -g_alpha * alpha;
-                    vec2 gm = g_sigma * vec2(con.x * d.x + con.y * d.y, con.z * d.y + con.y * d.x);
-                    g_mean += gm;
-                    g_abs += abs(gm);
-                    g_con += g_sigma * vec3(0.5 * d.x * d.x, d.x * d.y, 0.5 * d.y * d.y);
-                }
-            }
-        }
+#include "blend_bwd_splat.glsl"
         if (!subgroupAny(any_live)) continue;
         // Fold over the lanes holding this splat: one round where the subgroup is one band.
         for (;;) {
@@ -198,4 +169,68 @@ void main() {
             break;
         }
     }
+#else
+    // The walk back to front in batches of S entries: lane l loads entry jb − 1 − l and, after
+    // the batch, adds its splat's band sums to memory (per-lane loads and atomics are a loop
+    // over the lanes on llvmpipe: one per batch instead of one per splat).
+    for (uint jb = end; jb > range.x; jb -= min(S, jb - range.x)) {
+        uint nb = min(S, jb - range.x);
+        uint g_l = ids[jb - 1u - min(lane, nb - 1u)];
+        vec4 a_l = splats[SPLAT_STRIDE * g_l];
+        vec4 n_l = splats[SPLAT_STRIDE * g_l + 1];
+        vec4 c_l = splats[SPLAT_STRIDE * g_l + 2];
+#if FEAT > 0
+        float f_l[FEAT], s_f[FEAT];
+        for (int c = 0; c < FEAT; ++c) {
+            f_l[c] = feat[g_l * FEAT + c];
+            s_f[c] = 0.0;
+        }
+#endif
+        // This lane's splat's sums over the tile (13 slots of the 2D gradient record).
+        float s_g[13];
+        for (int c = 0; c < 13; ++c) s_g[c] = 0.0;
+        // Tested at its end, as in the forward (one loop-budget iteration per splat).
+        uint k = 0u;
+        do {
+            uint rel = jb - 1u - k - range.x; // 0-based position in the tile's list
+#include "blend_tile_take.glsl"
+#if FEAT > 0
+            float gfe[FEAT];
+            for (int c = 0; c < FEAT; ++c) gfe[c] = 0.0;
+#endif
+#include "blend_bwd_splat.glsl"
+            if (!subgroupAny(any_live)) continue;
+            fold(s_g[0], g_mean.x, lane, k);
+            fold(s_g[1], g_mean.y, lane, k);
+            fold(s_g[2], g_con.x, lane, k);
+            fold(s_g[3], g_con.y, lane, k);
+            fold(s_g[4], g_con.z, lane, k);
+            fold(s_g[5], g_op, lane, k);
+            fold(s_g[6], g_col.r, lane, k);
+            fold(s_g[7], g_col.g, lane, k);
+            fold(s_g[8], g_col.b, lane, k);
+            fold(s_g[9], g_z, lane, k);
+            if (pc.abs_grad != 0u) { // uniform: the densification's absolute statistic
+                fold(s_g[10], g_abs.x, lane, k);
+                fold(s_g[11], g_abs.y, lane, k);
+            }
+            if (pc.feat_op != 0u) fold(s_g[12], g_op_f, lane, k); // uniform
+#if FEAT > 0
+            for (int c = 0; c < FEAT; ++c) fold(s_f[c], gfe[c], lane, k);
+#endif
+        } while (++k < nb);
+        // Each lane's splat's sums, once per batch.
+        uint base = g_l * G2D_STRIDE;
+        for (int c = 0; c < 10; ++c) flush(base + uint(c), s_g[c]);
+        if (pc.abs_grad != 0u) {
+            flush(base + 10u, s_g[10]);
+            flush(base + 11u, s_g[11]);
+        }
+        if (pc.feat_op != 0u) flush(base + 12u, s_g[12]);
+#if FEAT > 0
+        for (int c = 0; c < FEAT; ++c)
+            if (s_f[c] != 0.0) atomicAdd(grad_feat[g_l * FEAT + c], s_f[c]);
+#endif
+    }
+#endif
 }

@@ -11,7 +11,12 @@
 // idle: the host keeps the shared-memory kernel there):
 // - whole tile (PX = 32, blend_fwd_tile_f*.comp): 8 invocations, one lavapipe coroutine of 8
 //   lanes per tile; the shared-memory kernel pays 4 barriers and 256 per-lane staging loads
-//   per batch of 256 splats, this one a broadcast load per splat.
+//   per batch of 256 splats. This one loads S list entries at a time, lane l the entry jb + l
+//   (id, record, features), and takes each splat's record from its lane with a shuffle at a
+//   uniform index: llvmpipe runs any buffer load whose address it cannot prove always uniform
+//   as a loop over the lanes, so a load per splat (four loops) was most of the walk's time
+//   (stop 74, docs/measurements.md "Batched splat loads"). A batch costs one loop iteration
+//   besides its splats': 9 per 8 splats, so an unsaturated walk reaches 58 254 entries.
 // - bands (PX = 8 and STEP_OVER, blend_fwd_band_f*.comp): 32 invocations, 4 rows per subgroup
 //   at lavapipe's 8 lanes, and a short loop that steps over the splats whose reach (the
 //   record's alpha_extent y) misses the band's rows. On lavapipe an `if` is an execution mask,
@@ -23,11 +28,13 @@
 // A pass on a CPU device dispatches both shapes, and each draws the tiles blend_pick.glsl gives
 // it (BlendParams.pick): the whole tile takes the lists longer than BAND_LIST_MAX (the loop
 // budget) and, below the default threshold, those whose splats mostly span every band.
-// Subgroup layout is a matter of speed only: every subgroup operation below is correct for any
-// grouping of the invocations (the band is gl_LocalInvocationIndex / S).
+// The band is gl_LocalInvocationIndex / S and its lane the index % S; the whole tile's
+// shuffles take that lane to be gl_SubgroupInvocationID's (subgroups of consecutive
+// invocations, as lavapipe makes them: these kernels are for CPU devices).
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_shuffle : require
 #include "common.glsl"
 #include "params.glsl"
 #include "raster.glsl"
@@ -73,10 +80,10 @@ void main() {
 #endif
     }
 
+#ifdef STEP_OVER
     uint j = range.x;
     for (; j < range.y; ++j) {
         if (subgroupAll(live == 0u)) break;
-#ifdef STEP_OVER
         // Step over the splats that reach no row of the band (α < 1/255 there).
         uint gid = 0u;
         vec4 a = vec4(0.0), c4 = vec4(0.0);
@@ -91,11 +98,6 @@ void main() {
             }
         }
         if (!found) break;
-#else
-        uint gid = ids[j]; // uniform: broadcast loads below
-        vec4 a = splats[SPLAT_STRIDE * gid];
-        vec4 c4 = splats[SPLAT_STRIDE * gid + 2];
-#endif
         vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
         vec3 col = c4.rgb;
 #if FEAT > 0
@@ -103,34 +105,45 @@ void main() {
         for (int c = 0; c < FEAT; ++c) f[c] = feat[gid * FEAT + c];
 #endif
         uint seen = j - range.x + 1u;
-        for (int i = 0; i < PX; ++i) {
-            if ((live & (1u << uint(i))) == 0u) continue;
-            uint q = first + lane + S * uint(i);
-            vec2 centre = vec2(origin + uvec2(q % TILE, q / TILE)) + 0.5;
-            vec2 d = a.xy - centre;
-            float sigma = splat_sigma(con, d);
-            float alpha = min(pc.alpha_max, a.w * exp(-sigma));
-            if (alpha < ALPHA_MIN) continue;
-            float test_t = T[i] * (1.0 - alpha);
-            if (test_t < T_STOP) {
-                live &= ~(1u << uint(i));
-                continue;
-            }
-            float w = alpha * T[i];
-            C[i] += w * col;
-            D[i] += w * a.z;
-#if FEAT > 0
-            for (int c = 0; c < FEAT; ++c) F[i * FEAT + c] += w * f[c];
-#endif
-            T[i] = test_t;
-            last[i] = seen;
-        }
+#include "blend_fwd_splat.glsl"
     }
+
+    bool walked = j >= range.y;
+#else
+    // The walk in batches of S entries: lane l loads entry jb + l (its id, record and
+    // features: one per-lane load loop per batch, where a load per splat cost llvmpipe one
+    // such loop per splat, most of a walk's time), then the batch's splats are blended in
+    // order, each record taken from its lane with a uniform-index shuffle.
+    uint jb = range.x;
+    for (; jb < range.y; jb += S) {
+        if (subgroupAll(live == 0u)) break;
+        uint nb = min(S, range.y - jb);
+        uint g_l = ids[jb + min(lane, nb - 1u)];
+        vec4 a_l = splats[SPLAT_STRIDE * g_l];
+        vec4 n_l = splats[SPLAT_STRIDE * g_l + 1];
+        vec4 c_l = splats[SPLAT_STRIDE * g_l + 2];
+#if FEAT > 0
+        float f_l[FEAT];
+        for (int c = 0; c < FEAT; ++c) f_l[c] = feat[g_l * FEAT + c];
+#endif
+        // A loop that tests at its end: lavapipe's loop budget counts one iteration per splat,
+        // where a loop that tests first would count one more per batch.
+        uint k = 0u;
+        do {
+            if (subgroupAll(live == 0u)) break;
+#include "blend_tile_take.glsl"
+            uint seen = jb + k - range.x + 1u;
+#include "blend_fwd_splat.glsl"
+        } while (++k < nb);
+    }
+
+    bool walked = jb >= range.y;
+#endif
 
     // The walk ends at the list's end or once every pixel is saturated. Ending elsewhere with a
     // live pixel means the device cut the loop (llvmpipe ends an invocation's loops after
     // 65 535 iterations in all, silently): the image is wrong, so say so.
-    if (j < range.y && live != 0u) atomicOr(overflow_word, OVERFLOW_WALK_CUT);
+    if (!walked && live != 0u) atomicOr(overflow_word, OVERFLOW_WALK_CUT);
 
     for (int i = 0; i < PX; ++i) {
         uint q = first + lane + S * uint(i);

@@ -75,9 +75,11 @@ impl KernelSet {
 }
 
 /// Issue 60's CPU set: the CPU kernels after issue 14, splats binned to their 3σ squares.
+/// Since stop 74 its whole-tile blends are today's, which load their splats in batches: the
+/// issue's own blends ran 2–3.6× slower (the stop-73 binary's rows, docs/measurements.md).
 const ISSUE_60: KernelSet = KernelSet {
     name: "rows MLP + tile-regs blend fwd + tile-accum blend bwd + serial node gather + rows \
-           blur + serial sort, 3σ tile squares",
+           blur + serial sort, 3σ tile squares (today's batched whole-tile blends)",
     mlp: "rows",
     blend_fwd: "tile-regs",
     blend_bwd: "tile-accum",
@@ -120,9 +122,10 @@ const BANDS: KernelSet = KernelSet {
 /// binning each splat to its opacity-aware box (issue 60), the same boxes binned depth first
 /// with the motion magnitude in runs (issue 60), that set with the blends in bands (issue 60)
 /// and the control-node blend over 4 slots at K <= 4 (stop 71; the older sets loop over all 8),
-/// and today's CPU default: the same with the blend backward giving each tile to the bands or
-/// the whole-tile kernel by the forward's stopping points (stop 72).
-pub const KERNEL_SETS: [KernelSet; 6] = [
+/// the same with the blend backward giving each tile to the bands or the whole-tile kernel by
+/// the forward's stopping points (stop 72), and today's CPU default: the same choices with the
+/// whole-tile blends, whose walks load their splats in batches (stop 74).
+pub const KERNEL_SETS: [KernelSet; 7] = [
     KernelSet {
         name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
         mlp: "tiled",
@@ -140,13 +143,23 @@ pub const KERNEL_SETS: [KernelSet; 6] = [
     BOXES,
     DEPTH_FIRST,
     BANDS,
+    PICKED,
     KernelSet {
-        name: "the same, the blend backward in bands or whole tiles picked per tile from the \
-               forward's stopping points",
-        blend_bwd: "tile-picked",
-        ..BANDS
+        name: "the same with whole-tile blends, which load their splats in batches (today's \
+               CPU default)",
+        blend_fwd: "tile-regs",
+        blend_bwd: "tile-accum",
+        ..PICKED
     },
 ];
+
+/// Stop 72–73's CPU default: [`BANDS`] with the blend backward picked per tile.
+const PICKED: KernelSet = KernelSet {
+    name: "the same, the blend backward in bands or whole tiles picked per tile from the \
+           forward's stopping points",
+    blend_bwd: "tile-picked",
+    ..BANDS
+};
 
 /// One timed configuration's result.
 pub struct StepRow {
@@ -471,7 +484,11 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
     }
     // Each later CPU set against the issue's and against the set it changes.
     let issue_set = KERNEL_SETS[1].name;
-    let (bands, picked) = (KERNEL_SETS[4].name, KERNEL_SETS[5].name);
+    let (bands, picked, whole) = (
+        KERNEL_SETS[4].name,
+        KERNEL_SETS[5].name,
+        KERNEL_SETS[6].name,
+    );
     for (set, prev, what, prev_what, change) in [
         (
             bands,
@@ -487,11 +504,18 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
             "the bands alone",
             "bands → picked",
         ),
+        (
+            whole,
+            picked,
+            "with whole-tile blends loading their splats in batches",
+            "stop 72–73's picked bands",
+            "picked bands → batched whole tiles",
+        ),
     ] {
         for r in rows.iter().filter(|r| r.kernels == set) {
             if let (Some(a), Some(b)) = (find(r, issue_set), find(r, prev)) {
                 println!(
-                    "{} {}: {what} the CPU step is {:.2}× faster than issue 60's CPU set ({:.2} \
+                    "{} {}: {what} the CPU step is {:.2}× faster than the issue-60 row ({:.2} \
                      vs {:.2} ms) and {:.2}× than {prev_what} ({:.2} ms); per zone, {change}: {}",
                     r.scene,
                     r.method,

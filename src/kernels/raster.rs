@@ -484,12 +484,10 @@ impl BlendBwdVariant {
     }
 }
 
-/// The default for a device: bands or whole tiles picked per tile on CPU devices (the bands
-/// alone: 1.6–1.8× the per-tile accumulation on the issue-14 scenes and on a trained model's
-/// step, which was itself 10–14× the subgroup kernel, `bench --suite raster`;
-/// docs/measurements.md, "Blends in bands"; the pick wins back the whole tiles where splats
-/// span every band, "The backward picks per tile"), with `TileAccum` drawing the tiles whose
-/// list is longer than [`BAND_LIST_MAX`]; the subgroup
+/// The default for a device: the per-tile accumulation on CPU devices since its walk loads
+/// its splats in batches (stop 74: 2.1× the picked bands on `bench --suite raster`'s
+/// D-NeRF-like scene, docs/measurements.md, "Batched splat loads"; before that the bands
+/// and the per-tile pick led, "Blends in bands", "The backward picks per tile"); the subgroup
 /// kernel on GPUs, where a few invocations per tile leave most of a warp idle (the whole
 /// CPU-shaped step measured 6.8–7.9× slower on an H200, docs/gpu_h200.md).
 /// `DISPFLOW_BLEND_BWD=subgroup-atomic|tile-accum|tile-bands|tile-picked` overrides the choice
@@ -497,7 +495,7 @@ impl BlendBwdVariant {
 impl DeviceShape for BlendBwdVariant {
     const ENV: &'static str = "DISPFLOW_BLEND_BWD";
     const ALL: &'static [Self] = &BlendBwdVariant::ALL;
-    const CPU: Self = BlendBwdVariant::TilePicked;
+    const CPU: Self = BlendBwdVariant::TileAccum;
     const GPU: Self = BlendBwdVariant::SubgroupAtomic;
 
     fn name(self) -> &'static str {
@@ -519,8 +517,9 @@ pub enum BlendFwdVariant {
     /// 16×16 invocations per tile, one pixel each, splats staged in shared memory in batches
     /// of 256 behind barriers (`blend_fwd.glsl`). GPU-shaped.
     Shared,
-    /// 8 invocations per tile, 32 pixels each in registers; splats read with uniform loads, no
-    /// barriers, no shared memory (`blend_fwd_tile.glsl`). CPU-shaped.
+    /// 8 invocations per tile, 32 pixels each in registers; splats loaded 8 at a time, one per
+    /// lane, and shuffled to the tile; no barriers, no shared memory (`blend_fwd_tile.glsl`).
+    /// CPU-shaped.
     TileRegs,
     /// 32 invocations per tile, 8 pixels each in registers, one subgroup per band of rows
     /// stepping over the splats that miss its rows (`blend_fwd_tile.glsl` with `STEP_OVER`).
@@ -545,16 +544,16 @@ impl BlendFwdVariant {
     }
 }
 
-/// The default for a device: pixels in registers, in bands, on CPU devices (lavapipe, `bench
-/// --suite raster`: 1.5–1.7× `TileRegs`, which draws the tiles whose list is longer than
-/// [`BAND_LIST_MAX`] and, with `DISPFLOW_BAND_COVER` below 32, those whose splats span most of
-/// their bands); the shared-memory kernel on GPUs, where a few invocations per tile
+/// The default for a device: pixels in registers, whole tiles, on CPU devices since that walk
+/// loads its splats in batches (stop 74, lavapipe, `bench --suite raster`: 3.3–3.6× the
+/// bands, which load theirs one at a time; docs/measurements.md, "Batched splat loads");
+/// the shared-memory kernel on GPUs, where a few invocations per tile
 /// leave most of a warp idle (measured on an H200 with the backward: docs/gpu_h200.md).
 /// `DISPFLOW_BLEND_FWD=shared|tile-regs|tile-bands` overrides the choice (benches, tests).
 impl DeviceShape for BlendFwdVariant {
     const ENV: &'static str = "DISPFLOW_BLEND_FWD";
     const ALL: &'static [Self] = &BlendFwdVariant::ALL;
-    const CPU: Self = BlendFwdVariant::TileBands;
+    const CPU: Self = BlendFwdVariant::TileRegs;
     const GPU: Self = BlendFwdVariant::Shared;
 
     fn name(self) -> &'static str {
