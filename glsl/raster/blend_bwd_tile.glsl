@@ -56,7 +56,7 @@ void add(uint idx, float v) {
     if (subgroupElect() && s != 0.0) atomicAdd(grad2d[idx], s);
 }
 
-// The band's sum of v, kept by lane k (the lane that loaded the splat).
+// The subgroup's sum of v, kept by lane k (the lane that loaded the splat).
 void fold(inout float acc, float v, uint lane, uint k) {
     float s = subgroupAdd(v);
     if (lane == k) acc = s;
