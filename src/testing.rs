@@ -39,6 +39,80 @@ extern "C" fn destroy_test_device() {
     }
 }
 
+/// `LP_NUM_THREADS` for a bit-reproducible lavapipe run: no worker threads, so every
+/// workgroup runs in order on the queue's own thread and float-atomic sums add in one order.
+/// `0` rather than `1`: the same order and results, without handing each dispatch to a worker
+/// (the built-in scene's 150-iteration fast train: 33.0 s at `1`, 30.0 s at `0`, same PSNR).
+pub const LP_SERIAL: &str = "0";
+
+/// Makes devices this process creates next bit-reproducible (see [`LP_SERIAL`]); a test calls
+/// it before its first [`gpu`].
+pub fn serial_lavapipe() {
+    std::env::set_var("LP_NUM_THREADS", LP_SERIAL);
+}
+
+/// Whether this process's lavapipe runs workgroups in a fixed order (`LP_NUM_THREADS` 0 or 1).
+pub fn lavapipe_is_serial() -> bool {
+    matches!(
+        std::env::var("LP_NUM_THREADS").as_deref(),
+        Ok("0") | Ok("1")
+    )
+}
+
+/// The child process that runs a binary's half-1 tests ([`in_other_half`]) and the file its
+/// output goes to; checked at exit.
+static HALF_CHILD: Mutex<Option<(std::process::Child, PathBuf)>> = Mutex::new(None);
+
+/// Waits for the half-1 child at exit; if it failed, prints its output and fails this binary
+/// (abort: by then nothing else can change the exit code).
+extern "C" fn check_half_child() {
+    let child = HALF_CHILD.lock().unwrap_or_else(|e| e.into_inner()).take();
+    let Some((mut child, log)) = child else {
+        return;
+    };
+    let status = child.wait();
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    let _ = std::fs::remove_file(&log);
+    if !status.as_ref().is_ok_and(|s| s.success()) {
+        eprintln!(
+            "the tests of half 1, which ran in a child process of this binary, failed \
+             ({status:?}); its output:\n{text}"
+        );
+        std::process::abort();
+    }
+}
+
+/// Splits a binary whose tests run one at a time on one core (serial lavapipe behind the one
+/// test device) over two processes: the first call starts a child process of this binary, with
+/// the same arguments, that runs the tests marked half 1 while this process runs those marked
+/// half 0. True when `this_test` belongs to the other process (the caller returns at once). A
+/// failure in the child fails this binary at exit with the child's output (libtest has already
+/// listed the half-1 tests as passed here; their results are the child's).
+pub fn in_other_half(this_test: &str, half: u8) -> bool {
+    assert!(half < 2, "{this_test}: half must be 0 or 1");
+    if std::env::var_os("DISPFLOW_HALF").is_some() {
+        return half != 1;
+    }
+    let mut guard = HALF_CHILD.lock().unwrap_or_else(|e| e.into_inner());
+    if guard.is_none() {
+        let exe = std::env::current_exe().expect("the test binary's path");
+        let log = std::env::temp_dir().join(format!("dispflow-half1-{}.log", std::process::id()));
+        let out = std::fs::File::create(&log).expect("the half-1 child's log file");
+        let err = out.try_clone().expect("the half-1 child's log file");
+        let child = std::process::Command::new(&exe)
+            .args(std::env::args_os().skip(1))
+            .env("DISPFLOW_HALF", "1")
+            .stdout(out)
+            .stderr(err)
+            .spawn()
+            .expect("start the half-1 child process");
+        // SAFETY: registering a plain function with libc's atexit.
+        unsafe { atexit(check_half_child) };
+        *guard = Some((child, log));
+    }
+    half == 1
+}
+
 /// Whether this run is CI's (`CI=true`), where a skipped check is a failure.
 pub fn in_ci() -> bool {
     std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")

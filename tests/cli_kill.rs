@@ -49,7 +49,8 @@ struct Setup {
 impl Setup {
     fn cmd(&self) -> Command {
         let mut c = Command::new(env!("CARGO_BIN_EXE_dispflow-vk"));
-        c.env_remove("RUST_BACKTRACE").env("LP_NUM_THREADS", "1");
+        c.env_remove("RUST_BACKTRACE")
+            .env("LP_NUM_THREADS", dispflow_vk::testing::LP_SERIAL);
         dispflow_vk::testing::isolated_home(&mut c, &self.root);
         c
     }

@@ -38,7 +38,7 @@ fn run(cfg: &TrainConfig) -> (Vec<CollapseEvent>, f64) {
     // Single-threaded lavapipe adds its float atomics in a fixed order: the warned and the
     // rolled-back run are then the same run up to the collapse (threaded, the rollback run
     // once fell too little to report at all).
-    std::env::set_var("LP_NUM_THREADS", "1");
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -285,7 +285,7 @@ fn train_cli(tmp: &std::path::Path, name: &str, cfg: &TrainConfig) -> (bool, Str
     let out = tmp.join(name);
     let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_dispflow-vk"));
     let o = dispflow_vk::testing::isolated_home(&mut cmd, tmp)
-        .env("LP_NUM_THREADS", "1")
+        .env("LP_NUM_THREADS", testing::LP_SERIAL)
         .args(["train", "--preset", "fast", "--config"])
         .arg(&toml)
         .arg("--data")
@@ -364,7 +364,7 @@ fn train_reports_a_mass_prune_and_stops_when_none_is_left() {
 fn a_non_finite_gaussian_is_found_and_retired() {
     use dispflow_vk::model::gaussians::Section;
     use dispflow_vk::train::params_check::{bad_rows, ParamCheck};
-    std::env::set_var("LP_NUM_THREADS", "1");
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();

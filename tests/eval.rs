@@ -509,7 +509,7 @@ fn check_sequence_zip(ply_dir: &Path, frames: usize) {
 #[test]
 fn evaluation_renders_on_the_datasets_background() {
     use dispflow_vk::train::config::Background;
-    std::env::set_var("LP_NUM_THREADS", "1");
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let gpu = testing::gpu();
     let dir = tiny_scene(tmp.path());

@@ -193,7 +193,7 @@ fn show(name: &str, o: &Outcome) {
 
 #[test]
 fn motion_loss_raises_mmap_over_the_baseline() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    testing::serial_lavapipe();
     if let Ok(spec) = std::env::var("DISPFLOW_MOTION_RUN") {
         return child_run(&spec);
     }

@@ -24,7 +24,7 @@ fn dynamic_psnr(tmp: &Path, scene: &Path, recipe: Option<&str>, seed: u32) -> f6
     let out = tmp.join(format!("{}-{seed}", recipe.unwrap_or("preset")));
     let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_dispflow-vk"));
     dispflow_vk::testing::isolated_home(&mut cmd, tmp)
-        .env("LP_NUM_THREADS", "1")
+        .env("LP_NUM_THREADS", dispflow_vk::testing::LP_SERIAL)
         .args(["train", "--preset", "fast", "--iterations", ITERATIONS])
         .args(["--seed", &seed.to_string(), "--data"])
         .arg(scene)

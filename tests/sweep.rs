@@ -76,7 +76,7 @@ impl Setup {
         let mut c = Command::new(env!("CARGO_BIN_EXE_dispflow-vk"));
         c.current_dir(&self.root)
             .env_remove("RUST_BACKTRACE")
-            .env("LP_NUM_THREADS", "1");
+            .env("LP_NUM_THREADS", dispflow_vk::testing::LP_SERIAL);
         dispflow_vk::testing::isolated_home(&mut c, &self.root);
         c
     }

@@ -13,7 +13,7 @@ mod train_common;
 #[test]
 fn motion_step_changes_the_deformation_in_both_orders() {
     // Must happen before the device exists (the first testing::gpu() call).
-    std::env::set_var("LP_NUM_THREADS", "1");
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();

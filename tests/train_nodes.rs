@@ -27,7 +27,7 @@ fn nodes_config() -> TrainConfig {
 #[test]
 fn nodes_field_trains_resumes_bit_exactly_and_is_refused_by_the_mlp_field() {
     // Must happen before the device exists (the first testing::gpu() call).
-    std::env::set_var("LP_NUM_THREADS", "1");
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();

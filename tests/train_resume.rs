@@ -4,8 +4,10 @@
 //! split samples) is hashed from (seed, iteration), Adam's step count is the iteration, and
 //! the checkpoint holds parameters, moments and densification statistics. The one source of
 //! run-to-run variation on lavapipe is the order of float atomic additions in blend_bwd across
-//! its worker threads, so this binary runs lavapipe with LP_NUM_THREADS=1. The same
-//! bit-exactness shows that evaluating in the middle of a run changes nothing of training.
+//! its worker threads, so this binary runs lavapipe serially (`testing::serial_lavapipe`). The
+//! same bit-exactness shows that evaluating in the middle of a run changes nothing of training.
+//! Serial lavapipe uses one core, so the tests split over two processes
+//! (`testing::in_other_half`).
 
 use dispflow_vk::testing;
 use dispflow_vk::train::checkpoint::Checkpoint;
@@ -16,8 +18,11 @@ mod train_common;
 
 #[test]
 fn resume_reproduces_an_uninterrupted_run() {
+    if testing::in_other_half("resume_reproduces_an_uninterrupted_run", 1) {
+        return;
+    }
     // Must happen before the device exists (the first testing::gpu() call).
-    std::env::set_var("LP_NUM_THREADS", "1");
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -56,7 +61,10 @@ fn resume_reproduces_an_uninterrupted_run() {
 
 #[test]
 fn evaluating_mid_run_does_not_change_training() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half("evaluating_mid_run_does_not_change_training", 0) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -88,7 +96,10 @@ fn evaluating_mid_run_does_not_change_training() {
 /// resumes bit-identically.
 #[test]
 fn split_checkpoint_resumes_bit_identically() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half("split_checkpoint_resumes_bit_identically", 1) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -135,7 +146,10 @@ fn split_checkpoint_resumes_bit_identically() {
 /// the written rows) differs between them, or turns the NaN run's numbers into NaN.
 #[test]
 fn memory_nothing_wrote_changes_nothing() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half("memory_nothing_wrote_changes_nothing", 0) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();

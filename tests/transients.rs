@@ -6,7 +6,8 @@
 //! with the temporal weights attached and detached (`[transient] motion_weights`).
 //!
 //! Over 600 lines on purpose: each test trains the tiny scene through the trainer's whole
-//! transient path; one binary keeps one build and one device start for all of them.
+//! transient path; one binary keeps one build and one device start for all of them. They run
+//! on serial lavapipe (one core), so they split over two processes (`testing::in_other_half`).
 
 mod train_common;
 
@@ -33,7 +34,13 @@ fn cfg() -> TrainConfig {
 
 #[test]
 fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half(
+        "transients_spawn_stay_last_and_learn_only_their_own_sections",
+        1,
+    ) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -138,7 +145,13 @@ fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
 /// restored split trainer steps exactly as the one it was taken from.
 #[test]
 fn the_split_covers_the_canonical_rows_and_composes_with_transients() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half(
+        "the_split_covers_the_canonical_rows_and_composes_with_transients",
+        1,
+    ) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -203,7 +216,13 @@ fn the_split_covers_the_canonical_rows_and_composes_with_transients() {
 
 #[test]
 fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half(
+        "transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full",
+        1,
+    ) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -239,6 +258,12 @@ fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full()
 
 #[test]
 fn a_transient_run_writes_reopens_and_exports_its_transients() {
+    if testing::in_other_half(
+        "a_transient_run_writes_reopens_and_exports_its_transients",
+        0,
+    ) {
+        return;
+    }
     let tmp = tempfile::tempdir().unwrap();
     let scene = tiny_scene(tmp.path());
     let toml = tmp.path().join("t.toml");
@@ -251,7 +276,7 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
     let out = tmp.path().join("run");
     let bin = env!("CARGO_BIN_EXE_dispflow-vk");
     let o = std::process::Command::new(bin)
-        .env("LP_NUM_THREADS", "1")
+        .env("LP_NUM_THREADS", testing::LP_SERIAL)
         .args([
             "train",
             "--preset",
@@ -313,7 +338,7 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
     assert!(stderr.contains("GPU ms per step by population"), "{stderr}");
     // eval reopens point_cloud.ply + transients.ply and scores the same model.
     let o = std::process::Command::new(bin)
-        .env("LP_NUM_THREADS", "1")
+        .env("LP_NUM_THREADS", testing::LP_SERIAL)
         .args(["eval", "--no-pictures", "--run"])
         .arg(&out)
         .output()
@@ -327,7 +352,7 @@ fn a_transient_run_writes_reopens_and_exports_its_transients() {
     assert_eq!(e["num_gaussians"], m["num_gaussians"]);
     // Per-frame PLYs hold the canonical Gaussians and only the transients alive then.
     let o = std::process::Command::new(bin)
-        .env("LP_NUM_THREADS", "1")
+        .env("LP_NUM_THREADS", testing::LP_SERIAL)
         .args(["render", "--path", "test", "--ply", "--run"])
         .arg(&out)
         .output()
@@ -375,7 +400,13 @@ fn walk(d: &std::path::Path, ext: &str) -> Vec<std::path::PathBuf> {
 /// the same either way (the term reaches v through the drawn mean and v·(t2 − t1)).
 #[test]
 fn detached_motion_weights_leave_the_time_gradients_to_the_photometric_render() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half(
+        "detached_motion_weights_leave_the_time_gradients_to_the_photometric_render",
+        1,
+    ) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -455,7 +486,10 @@ fn detached_motion_weights_leave_the_time_gradients_to_the_photometric_render() 
 /// row is kept for transients before the first spawn.
 #[test]
 fn auto_spawns_once_a_residual_has_held_through_the_gate() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half("auto_spawns_once_a_residual_has_held_through_the_gate", 0) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -573,7 +607,10 @@ fn auto_spawns_once_a_residual_has_held_through_the_gate() {
 /// run without transients (the rounds only look; no row, no reserve, no state changes).
 #[test]
 fn auto_with_a_closed_gate_trains_exactly_as_off() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half("auto_with_a_closed_gate_trains_exactly_as_off", 1) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -610,7 +647,10 @@ fn auto_with_a_closed_gate_trains_exactly_as_off() {
 /// Which one is kept (the most opaque) is `resolve`'s unit test; here the trainer's wiring.
 #[test]
 fn resolve_keeps_one_depth_hypothesis_per_pixel() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half("resolve_keeps_one_depth_hypothesis_per_pixel", 1) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();
@@ -677,7 +717,13 @@ fn resolve_keeps_one_depth_hypothesis_per_pixel() {
 /// spawn at 60 and before its resolution at 90.
 #[test]
 fn a_transient_run_resumed_between_spawns_trains_as_the_uninterrupted_one() {
-    std::env::set_var("LP_NUM_THREADS", "1");
+    if testing::in_other_half(
+        "a_transient_run_resumed_between_spawns_trains_as_the_uninterrupted_one",
+        0,
+    ) {
+        return;
+    }
+    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::gpu();

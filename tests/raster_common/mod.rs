@@ -370,17 +370,16 @@ pub fn twin_blend_bwd(
 }
 
 /// On lavapipe with more than one thread (float-atomic sums in any order), re-runs the test
-/// `name` of this binary with `LP_NUM_THREADS=1` and checks it passed; true when it did so
+/// `name` of this binary serially ([`testing::LP_SERIAL`]) and checks it passed; true when it did so
 /// (the caller returns), false where the run is already bit-reproducible.
 pub fn rerun_single_threaded(gpu: &TestGpu, name: &str) -> bool {
-    if !gpu.info.name.contains("llvmpipe") || std::env::var("LP_NUM_THREADS").as_deref() == Ok("1")
-    {
+    if !gpu.info.name.contains("llvmpipe") || testing::lavapipe_is_serial() {
         return false;
     }
     let exe = std::env::current_exe().expect("the test binary's path");
     let out = std::process::Command::new(exe)
         .args([name, "--exact", "--nocapture"])
-        .env("LP_NUM_THREADS", "1")
+        .env("LP_NUM_THREADS", testing::LP_SERIAL)
         .output()
         .expect("re-run the test single-threaded");
     let text = format!(
