@@ -7,7 +7,7 @@
 //! run one at a time while CPU-only tests stay parallel.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, MutexGuard};
 
 use crate::vk::{Gpu, GpuOptions, Validation, VALIDATION_ERRORS};
@@ -45,10 +45,29 @@ extern "C" fn destroy_test_device() {
 /// (the built-in scene's 150-iteration fast train: 33.0 s at `1`, 30.0 s at `0`, same PSNR).
 pub const LP_SERIAL: &str = "0";
 
-/// Makes devices this process creates next bit-reproducible (see [`LP_SERIAL`]); a test calls
-/// it before its first [`gpu`].
+/// Makes devices this process creates next bit-reproducible (see [`LP_SERIAL`]). A test that
+/// needs it takes its device from [`serial_gpu`], which also checks the shared device obeyed.
 pub fn serial_lavapipe() {
     std::env::set_var("LP_NUM_THREADS", LP_SERIAL);
+}
+
+/// Whether the shared device was created with serial lavapipe (or is not lavapipe).
+static CREATED_SERIAL: AtomicBool = AtomicBool::new(false);
+
+/// The shared device, bit-reproducible: lavapipe created serially ([`serial_lavapipe`]). The
+/// device is created once per process, by whichever test asks first, so every test of a binary
+/// that has a bit-reproducibility test must ask through here; one that called [`gpu`] first
+/// makes this panic instead of letting the comparison fail by the thread scheduler's order.
+pub fn serial_gpu() -> TestGpu {
+    serial_lavapipe();
+    let g = gpu();
+    assert!(
+        CREATED_SERIAL.load(Ordering::SeqCst),
+        "this binary's test device was created with threaded lavapipe, by a test that asked \
+         testing::gpu() for it before this one asked testing::serial_gpu(): every test of a \
+         binary with a bit-reproducibility test must take its device from serial_gpu()"
+    );
+    g
 }
 
 /// Whether this process's lavapipe runs workgroups in a fixed order (`LP_NUM_THREADS` 0 or 1).
@@ -153,6 +172,8 @@ pub fn gpu() -> TestGpu {
             };
         }
         let gpu = Gpu::new(&opts).unwrap_or_else(|e| panic!("test device: {e}"));
+        let serial = lavapipe_is_serial() || !gpu.info.name.contains("llvmpipe");
+        CREATED_SERIAL.store(serial, Ordering::SeqCst);
         eprintln!(
             "test device: {} (subgroup {}, validation {})",
             gpu.info,

@@ -8,7 +8,7 @@
 //!
 //! And a closed stdout pipe ends a command quietly, not with a panic.
 //!
-//! Both runs use LP_NUM_THREADS=1: lavapipe's float atomics then add in a fixed order, so the
+//! Both runs use serial lavapipe (`testing::LP_SERIAL`): lavapipe's float atomics then add in a fixed order, so the
 //! run is reproducible bit for bit (see tests/train_resume.rs).
 
 use std::path::{Path, PathBuf};

@@ -38,10 +38,9 @@ fn run(cfg: &TrainConfig) -> (Vec<CollapseEvent>, f64) {
     // Single-threaded lavapipe adds its float atomics in a fixed order: the warned and the
     // rolled-back run are then the same run up to the collapse (threaded, the rollback run
     // once fell too little to report at all).
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut tr = Trainer::new(&gpu, cfg, &ds).unwrap();
     let (mut guard, first) = CollapseGuard::new(&mut tr).unwrap();
     assert!(first.is_none(), "the initial renders are finite");
@@ -364,10 +363,9 @@ fn train_reports_a_mass_prune_and_stops_when_none_is_left() {
 fn a_non_finite_gaussian_is_found_and_retired() {
     use dispflow_vk::model::gaussians::Section;
     use dispflow_vk::train::params_check::{bad_rows, ParamCheck};
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let cfg = tiny_config(40);
     let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
     train_common::run_to(&mut tr, 10);

@@ -246,7 +246,7 @@ fn eval_and_render_a_tiny_run() {
     );
     // A frame's PLY reads back as exactly the deformed Gaussians of its time.
     let run = open_run(&motion, None).unwrap();
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let (_ds, mut tr) = load_trainer(&gpu, &run).unwrap();
     let mut test: Vec<f32> = tr.val.iter().map(|f| f.time).collect();
     test.sort_by(f32::total_cmp);
@@ -509,9 +509,8 @@ fn check_sequence_zip(ply_dir: &Path, frames: usize) {
 #[test]
 fn evaluation_renders_on_the_datasets_background() {
     use dispflow_vk::train::config::Background;
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let dir = tiny_scene(tmp.path());
     for (bg, colour) in [(Background::Black, 0.0f32), (Background::White, 1.0)] {
         let mut cfg = train_common::tiny_config(1);

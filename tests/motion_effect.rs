@@ -21,7 +21,7 @@
 //! win is not asserted for it. Detached, they were +0.052/+0.009/+0.085, partly from
 //! shrinking the displacement, which kills the deformation in longer runs. With the binary
 //! of issue 37, seeds 0/1: baselines 0.102/0.128, TV-L1 gains +0.082/−0.001, oracle
-//! +0.19/+0.21, noise 0.025.) lavapipe runs with LP_NUM_THREADS=1 here: its float atomics
+//! +0.19/+0.21, noise 0.025.) lavapipe runs serially here (`testing::LP_SERIAL`): its float atomics
 //! then add in a fixed order, so every run is bit-reproducible and the noise is the
 //! seeds', not the thread scheduler's (with threads, one seed's TV-L1 run
 //! measured MMAP 0.134–0.200 in three runs). Each of the six runs is a child process (this
@@ -49,7 +49,7 @@ struct Outcome {
 }
 
 fn train(ds: &data::Dataset, cfg: &TrainConfig) -> Outcome {
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut tr = Trainer::new(&gpu, cfg, ds).unwrap();
     while tr.iteration < cfg.iterations {
         tr.step(false, false).unwrap();

@@ -10,7 +10,7 @@
 //!
 //! The lists and the forward outputs carry no float atomics and are compared at any lavapipe
 //! thread count; gradients are float-atomic sums, so that comparison re-runs itself with
-//! `LP_NUM_THREADS=1` on lavapipe.
+//! serial lavapipe (`testing::LP_SERIAL`).
 
 mod raster_common;
 

@@ -7,7 +7,7 @@
 //! without opacity factors). The twin's blend is unchanged by its boxes too.
 //!
 //! Gradients are float-atomic sums: bit-reproducible on one lavapipe thread only, so the GPU
-//! comparison re-runs itself with `LP_NUM_THREADS=1` there.
+//! comparison re-runs itself on serial lavapipe (`testing::LP_SERIAL`) there.
 
 mod raster_common;
 

@@ -5,7 +5,7 @@
 //! `afterok` gather job) through real slurmctld/slurmd/munged daemons started by
 //! tools/slurm_local.sh, including a failing cell that must cancel the gather job.
 //!
-//! Runs use LP_NUM_THREADS=1 so that a resumed run equals an uninterrupted one bit for bit.
+//! Runs use serial lavapipe (`testing::LP_SERIAL`) so that a resumed run equals an uninterrupted one bit for bit.
 //! (Over ~600 lines: one file because every test shares the tiny plan, its scenes and the
 //! check of a finished sweep's tables.)
 
@@ -345,7 +345,7 @@ fn a_killed_cell_resumes_from_its_checkpoint() {
     let a = read_results(&s.root.join("whole/results.jsonl")).unwrap();
     let b = read_results(&s.root.join("killed/results.jsonl")).unwrap();
     assert_eq!((a.len(), b.len()), (1, 1));
-    // Bit-exact resume (LP_NUM_THREADS=1): the same quality as the uninterrupted cell.
+    // Bit-exact resume (serial lavapipe): the same quality as the uninterrupted cell.
     assert_eq!(
         (a[0].psnr, a[0].ssim, a[0].mmap),
         (b[0].psnr, b[0].ssim, b[0].mmap)

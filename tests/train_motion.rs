@@ -1,5 +1,5 @@
 //! The DispFlow-GS motion step in training, both decomposition orders, against the same run
-//! without it. lavapipe runs with LP_NUM_THREADS=1 here, so float-atomic sums are
+//! without it. lavapipe runs serially here (`testing::serial_gpu`), so float-atomic sums are
 //! reproducible and "the motion term changed the model" is measured against the run-to-run
 //! noise of this very binary (two identical baseline runs), not guessed.
 
@@ -12,11 +12,9 @@ mod train_common;
 
 #[test]
 fn motion_step_changes_the_deformation_in_both_orders() {
-    // Must happen before the device exists (the first testing::gpu() call).
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut cfg = tiny_config(40);
     cfg.warm_up = 10;
     cfg.densify.until = 0;
@@ -84,7 +82,7 @@ fn every_kernel_of_a_timed_step_names_its_zone() {
     use dispflow_vk::train::cost::{kind_of, KernelKind};
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     for (field, repr, l1) in [
         (
             FieldKind::Nodes,

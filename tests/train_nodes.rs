@@ -26,11 +26,9 @@ fn nodes_config() -> TrainConfig {
 
 #[test]
 fn nodes_field_trains_resumes_bit_exactly_and_is_refused_by_the_mlp_field() {
-    // Must happen before the device exists (the first testing::gpu() call).
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let cfg = nodes_config();
 
     let mut a = Trainer::new(&gpu, &cfg, &ds).unwrap();

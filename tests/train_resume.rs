@@ -4,7 +4,7 @@
 //! split samples) is hashed from (seed, iteration), Adam's step count is the iteration, and
 //! the checkpoint holds parameters, moments and densification statistics. The one source of
 //! run-to-run variation on lavapipe is the order of float atomic additions in blend_bwd across
-//! its worker threads, so this binary runs lavapipe serially (`testing::serial_lavapipe`). The
+//! its worker threads, so this binary runs lavapipe serially (`testing::serial_gpu`). The
 //! same bit-exactness shows that evaluating in the middle of a run changes nothing of training.
 //! Serial lavapipe uses one core, so the tests split over two processes
 //! (`testing::in_other_half`).
@@ -21,11 +21,9 @@ fn resume_reproduces_an_uninterrupted_run() {
     if testing::in_other_half("resume_reproduces_an_uninterrupted_run", 1) {
         return;
     }
-    // Must happen before the device exists (the first testing::gpu() call).
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut cfg = tiny_config(60);
     cfg.warm_up = 25; // the MLP trains in both halves
     cfg.densify.from = 10;
@@ -64,10 +62,9 @@ fn evaluating_mid_run_does_not_change_training() {
     if testing::in_other_half("evaluating_mid_run_does_not_change_training", 0) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let cfg = tiny_motion_config();
     let run = |eval_at: Option<u32>| {
         let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
@@ -99,10 +96,9 @@ fn split_checkpoint_resumes_bit_identically() {
     if testing::in_other_half("split_checkpoint_resumes_bit_identically", 1) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut cfg = tiny_config(120);
     cfg.warm_up = 40;
     cfg.sparsity.start = 0.1; // first split after 48, re-splits every 20
@@ -149,10 +145,9 @@ fn memory_nothing_wrote_changes_nothing() {
     if testing::in_other_half("memory_nothing_wrote_changes_nothing", 0) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut cfg = tiny_motion_config();
     spawn_transients(&mut cfg, 15, 0.3);
     /// Clears the poison however the run ends (the device is shared by this binary's tests).

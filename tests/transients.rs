@@ -40,10 +40,9 @@ fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
     ) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let cfg = cfg();
     let mut tr = Trainer::new(&gpu, &cfg, &ds).unwrap();
     let mut spawned = 0;
@@ -151,10 +150,9 @@ fn the_split_covers_the_canonical_rows_and_composes_with_transients() {
     ) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut cfg = cfg();
     cfg.sparsity.mode = SparsityMode::Auto;
     cfg.sparsity.start = 0.0;
@@ -222,10 +220,9 @@ fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full()
     ) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     // No reserved share at all: the canonical population leaves rows free, so spawns use them.
     let mut c = cfg();
     c.transient.max_share = 0.0;
@@ -406,10 +403,9 @@ fn detached_motion_weights_leave_the_time_gradients_to_the_photometric_render() 
     ) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let sections = [
         Section::TimeCentre,
         Section::TimeLogWidth,
@@ -489,10 +485,9 @@ fn auto_spawns_once_a_residual_has_held_through_the_gate() {
     if testing::in_other_half("auto_spawns_once_a_residual_has_held_through_the_gate", 0) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut c = cfg();
     c.transient.mode = TransientMode::Auto;
     c.transient.persist = 1e-6; // every residual holds: the gate alone decides when
@@ -610,10 +605,9 @@ fn auto_with_a_closed_gate_trains_exactly_as_off() {
     if testing::in_other_half("auto_with_a_closed_gate_trains_exactly_as_off", 1) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let run = |mode: TransientMode| {
         let mut c = cfg();
         c.iterations = 120;
@@ -650,10 +644,9 @@ fn resolve_keeps_one_depth_hypothesis_per_pixel() {
     if testing::in_other_half("resolve_keeps_one_depth_hypothesis_per_pixel", 1) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut c = cfg();
     c.transient.track = 0; // every picked pixel spawns `depths` (2) hypotheses
     c.densify.until = 60; // no densification moves the rows after the first spawn
@@ -723,10 +716,9 @@ fn a_transient_run_resumed_between_spawns_trains_as_the_uninterrupted_one() {
     ) {
         return;
     }
-    testing::serial_lavapipe();
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
-    let gpu = testing::gpu();
+    let gpu = testing::serial_gpu();
     let mut c = cfg();
     c.transient.track = 0;
     let mut a = Trainer::new(&gpu, &c, &ds).unwrap();
