@@ -48,6 +48,13 @@ name = "DispFlow-GS"
 flags = { method = "dispflow", deform-field = "nodes", nodes = 32 }
 "#;
 
+/// [`VARIANTS`]' first variant alone.
+const BASELINE: &str = r#"
+[[variant]]
+name = "baseline"
+flags = { method = "deformable-3dgs" }
+"#;
+
 struct Setup {
     root: PathBuf,
     _tmp: tempfile::TempDir,
@@ -109,8 +116,13 @@ impl Setup {
 }
 
 fn two_scenes() -> String {
+    two_scenes_with(VARIANTS)
+}
+
+/// The two tiny scenes under `variants`.
+fn two_scenes_with(variants: &str) -> String {
     format!(
-        "{COMMON}\n[[scene]]\nname = \"moving\"\ndata = \"moving\"\n[[scene]]\nname = \"frozen\"\ndata = \"frozen\"\n{VARIANTS}"
+        "{COMMON}\n[[scene]]\nname = \"moving\"\ndata = \"moving\"\n[[scene]]\nname = \"frozen\"\ndata = \"frozen\"\n{variants}"
     )
 }
 
@@ -562,8 +574,9 @@ fn the_slurm_path_runs_a_job_array_and_a_dependent_gather_job() {
 
     // A failing cell cancels the gather job instead of leaving it pending forever: submit the
     // written scripts by hand after the frozen scene's images have been damaged (the plan
-    // still loads; its cells' training refuses the dataset).
-    let plan = s.plan("failing", &two_scenes());
+    // still loads; its cells' training refuses the dataset). One variant: two cells, one
+    // array step, the same failure (the second variant would only train another moving cell).
+    let plan = s.plan("failing", &two_scenes_with(BASELINE));
     let (ok, text) = s.sweep_on(
         &[plan.to_str().unwrap(), "--out", "failing", "--slurm"],
         Some(&conf),
