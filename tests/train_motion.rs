@@ -1,7 +1,8 @@
 //! The DispFlow-GS motion step in training, both decomposition orders, against the same run
 //! without it. lavapipe runs serially here (`testing::serial_gpu`), so float-atomic sums are
 //! reproducible and "the motion term changed the model" is measured against the run-to-run
-//! noise of this very binary (two identical baseline runs), not guessed.
+//! noise of this very binary (two identical baseline runs), not guessed. The two tests run in
+//! two processes (`testing::in_other_half`), one core each.
 
 use dispflow_vk::testing;
 use dispflow_vk::train::config::MotionOrder;
@@ -12,6 +13,9 @@ mod train_common;
 
 #[test]
 fn motion_step_changes_the_deformation_in_both_orders() {
+    if testing::in_other_half("motion_step_changes_the_deformation_in_both_orders", 0) {
+        return;
+    }
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::serial_gpu();
@@ -77,6 +81,9 @@ fn motion_step_changes_the_deformation_in_both_orders() {
 /// counted as the Gaussians').
 #[test]
 fn every_kernel_of_a_timed_step_names_its_zone() {
+    if testing::in_other_half("every_kernel_of_a_timed_step_names_its_zone", 1) {
+        return;
+    }
     use dispflow_vk::model::nodes::FieldKind;
     use dispflow_vk::train::config::MotionRepresentation;
     use dispflow_vk::train::cost::{kind_of, KernelKind};
