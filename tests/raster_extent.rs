@@ -68,10 +68,9 @@ fn render_with(
 
 #[test]
 fn boxes_change_no_pixel_and_no_gradient() {
-    let gpu = testing::gpu();
-    if rerun_single_threaded(&gpu, TEST_BITS) {
+    let Some(gpu) = rerun_single_threaded(testing::gpu(), TEST_BITS) else {
         return;
-    }
+    };
     let mut rast = Rasterizer::new(&gpu).unwrap();
     assert_eq!(rast.splat_extent(), SplatExtent::OpacityBox, "the default");
     for (seed, n, w, h, k) in [

@@ -370,12 +370,15 @@ pub fn twin_blend_bwd(
 }
 
 /// On lavapipe with more than one thread (float-atomic sums in any order), re-runs the test
-/// `name` of this binary serially ([`testing::LP_SERIAL`]) and checks it passed; true when it did so
-/// (the caller returns), false where the run is already bit-reproducible.
-pub fn rerun_single_threaded(gpu: &TestGpu, name: &str) -> bool {
+/// `name` of this binary serially ([`testing::LP_SERIAL`]) and checks it passed, then gives
+/// `None` (the caller returns); gives the device back where the run is already
+/// bit-reproducible. The device is released before the re-run, so this process's other tests
+/// use it meanwhile (holding it serialised them behind the child: raster_binning's 15 s).
+pub fn rerun_single_threaded(gpu: TestGpu, name: &str) -> Option<TestGpu> {
     if !gpu.info.name.contains("llvmpipe") || testing::lavapipe_is_serial() {
-        return false;
+        return Some(gpu);
     }
+    drop(gpu);
     let exe = std::env::current_exe().expect("the test binary's path");
     let out = std::process::Command::new(exe)
         .args([name, "--exact", "--nocapture"])
@@ -391,7 +394,7 @@ pub fn rerun_single_threaded(gpu: &TestGpu, name: &str) -> bool {
         out.status.success() && text.contains("1 passed"),
         "single-threaded re-run:\n{text}"
     );
-    true
+    None
 }
 
 /// The twin's blend parameters for a render of `cam` with `opts` and `k` feature channels.
