@@ -1,6 +1,7 @@
 //! The Vulkan layer: device facts, the hazard tracker, timestamps, validation wiring, errors.
 
 use dispflow_vk::kernels::scan::{Count, PrefixSum};
+use dispflow_vk::shaders;
 use dispflow_vk::testing;
 use dispflow_vk::vk::{Gpu, GpuOptions, Recorder, Validation};
 
@@ -97,6 +98,29 @@ fn timestamps_time_every_dispatch() {
         "{t:?}"
     );
     assert!(t.total_ms() > 0.0);
+    let got: Vec<u32> = gpu.read(buf.elems::<u32>(n as u64 - 1, 1)).unwrap();
+    assert_eq!(got[0], n - 1);
+}
+
+#[test]
+fn a_device_builds_each_pipeline_once_and_keeps_it_while_used() {
+    let gpu = testing::gpu();
+    let a = gpu.pipeline(&shaders::scan::SCAN_SETUP).unwrap();
+    let b = gpu.pipeline(&shaders::scan::SCAN_SETUP).unwrap();
+    let other = gpu.pipeline(&shaders::scan::SCAN_REDUCE).unwrap();
+    assert_eq!(a.raw(), b.raw(), "the same shader, the same pipeline");
+    assert_ne!(a.raw(), other.raw());
+    drop((a, b, other));
+    // A wrapper dropped and another built: the second one's pipelines work (the device keeps
+    // them; the validation layer reports any use of a destroyed one, and leaks at exit).
+    drop(PrefixSum::new(&gpu).unwrap());
+    let scan = PrefixSum::new(&gpu).unwrap();
+    let n = 5_000u32;
+    let s = scan.scratch(&gpu, n).unwrap();
+    let buf = gpu.buffer_from("data", &vec![1u32; n as usize]).unwrap();
+    let mut rec = Recorder::new(&gpu).unwrap();
+    scan.record(&mut rec, &s, buf.all(), buf.all(), Count::Host(n));
+    rec.finish().unwrap();
     let got: Vec<u32> = gpu.read(buf.elems::<u32>(n as u64 - 1, 1)).unwrap();
     assert_eq!(got[0], n - 1);
 }

@@ -151,6 +151,7 @@ pub struct Gpu {
     /// 0: off; else `1 << 32 | word` (see `GpuOptions::poison`; atomic so a test can steer the
     /// shared test device).
     poison: std::sync::atomic::AtomicU64,
+    pub(crate) pipelines: super::pipeline::PipelineCache,
 }
 
 /// Device memory held by the allocator: live allocations and the blocks reserved for them.
@@ -401,6 +402,7 @@ impl Gpu {
                     push_desc,
                     info,
                     poison: std::sync::atomic::AtomicU64::new(poison_bits(opts.poison)),
+                    pipelines: Default::default(),
                 })
             }
             Err(e) => {

@@ -1,6 +1,7 @@
 //! Compute pipelines built from the reflected shader table (no layout written by hand).
 
-use std::sync::Arc;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 use ash::vk;
 
@@ -9,22 +10,35 @@ use crate::error::Result;
 use crate::shaders::ShaderInfo;
 
 /// A compute pipeline whose descriptor layout (push descriptors, set 0), push-constant range and
-/// workgroup size come from the SPIR-V reflection in the shader table.
+/// workgroup size come from the SPIR-V reflection in the shader table. Shared: every wrapper
+/// asking its device for the same shader gets the same Vulkan objects ([`PipelineCache`]).
 pub struct ComputePipeline {
-    shared: Arc<Shared>,
     pub info: &'static ShaderInfo,
     pub(crate) pipeline: vk::Pipeline,
     pub(crate) layout: vk::PipelineLayout,
-    set_layout: vk::DescriptorSetLayout,
+    _objects: Arc<PipelineObjects>,
 }
 
 impl ComputePipeline {
     pub fn workgroup_size(&self) -> [u32; 3] {
         self.info.workgroup_size
     }
+
+    /// The Vulkan pipeline handle (tests check two wrappers share one).
+    pub fn raw(&self) -> vk::Pipeline {
+        self.pipeline
+    }
 }
 
-impl Drop for ComputePipeline {
+/// The Vulkan objects of one shader's pipeline, destroyed with their last user.
+struct PipelineObjects {
+    shared: Arc<Shared>,
+    pipeline: vk::Pipeline,
+    layout: vk::PipelineLayout,
+    set_layout: vk::DescriptorSetLayout,
+}
+
+impl Drop for PipelineObjects {
     fn drop(&mut self) {
         let d = &self.shared.device;
         unsafe {
@@ -35,8 +49,34 @@ impl Drop for ComputePipeline {
     }
 }
 
+/// A device's pipelines by shader, built on first use: a pipeline depends on its shader alone
+/// (no specialisation constants), and building one is not cheap (lavapipe: ~20 ms of SPIR-V
+/// to NIR for each, its shader cache notwithstanding; a rasteriser's ~60 took ~1 s, so every
+/// `Trainer::new` or `Rasterizer::new` after the first paid it again).
+#[derive(Default)]
+pub(crate) struct PipelineCache(Mutex<HashMap<&'static str, Arc<PipelineObjects>>>);
+
 impl Gpu {
+    /// The pipeline of `info`: the device's own if it built one already, else a new one.
     pub fn pipeline(&self, info: &'static ShaderInfo) -> Result<ComputePipeline> {
+        let mut cache = self.pipelines.0.lock().unwrap_or_else(|e| e.into_inner());
+        let objects = match cache.get(info.name) {
+            Some(o) => o.clone(),
+            None => {
+                let o = Arc::new(self.build_pipeline(info)?);
+                cache.insert(info.name, o.clone());
+                o
+            }
+        };
+        Ok(ComputePipeline {
+            info,
+            pipeline: objects.pipeline,
+            layout: objects.layout,
+            _objects: objects,
+        })
+    }
+
+    fn build_pipeline(&self, info: &'static ShaderInfo) -> Result<PipelineObjects> {
         let d = self.device();
         let bindings: Vec<_> = info
             .bindings
@@ -85,9 +125,8 @@ impl Gpu {
         let res = unsafe { d.create_compute_pipelines(vk::PipelineCache::null(), &ci, None) };
         unsafe { d.destroy_shader_module(module, None) };
         let pipeline = res.map_err(|(_, e)| e)?[0];
-        Ok(ComputePipeline {
+        Ok(PipelineObjects {
             shared: self.shared.clone(),
-            info,
             pipeline,
             layout,
             set_layout,
