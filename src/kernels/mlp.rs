@@ -1,7 +1,8 @@
 //! The deformation MLP, layer-wise implementation (`glsl/mlp/{encode,linear_fwd,
 //! linear_bwd_data,linear_bwd_weight,reduce_grad}.comp`). CPU twin: `reference::mlp`.
-//! (Over 600 lines: the forward, both backward halves and the gradient reduction share one
-//! scratch layout and its per-Linear offsets; split, each file would recompute them.)
+//! (Over 600 lines: the forward, both backward halves, the gradient reduction and the row
+//! chunking share one scratch layout, its per-Linear offsets and which activation each backward
+//! stage reads; split, each file would restate them.)
 //!
 //! One dispatch per Linear, dims and offsets in push constants, so depth, width, skip and the
 //! time encoding are runtime configuration ([`MlpConfig`]). On GPUs every Linear is a 64×64-tiled
@@ -9,9 +10,6 @@
 //! ([`super::mlp_rows`], same buffers and maths) runs them. The skip concatenation
 //! `[γ(x), t_feat, h]` is read from two buffers without a copy. Batches whose rows exceed one
 //! storage-buffer binding run in chunks of rows ([`MlpBuffers::chunk_rows`]).
-//!
-//! Longer than 600 lines because the forward, the backward and the chunking share one buffer
-//! contract (which activation each backward stage reads); split, each half would restate it.
 //!
 //! Backward stores activations (no recomputation): the forward keeps the encoded input, the
 //! time-net hidden layer and every trunk layer's post-ReLU output, which also serve as the ReLU

@@ -50,8 +50,8 @@ impl Drop for PipelineObjects {
 }
 
 /// A device's pipelines by shader, built on first use: a pipeline depends on its shader alone
-/// (no specialisation constants), and building one is not cheap (lavapipe: ~20 ms of SPIR-V
-/// to NIR for each, its shader cache notwithstanding; a rasteriser's ~60 took ~1 s, so every
+/// (no specialisation constants), and building one is not cheap (lavapipe: ~25 ms of SPIR-V
+/// to NIR for each, its shader cache notwithstanding; a rasteriser's ~40 took ~1 s, so every
 /// `Trainer::new` or `Rasterizer::new` after the first paid it again).
 #[derive(Default)]
 pub(crate) struct PipelineCache(Mutex<HashMap<&'static str, Arc<PipelineObjects>>>);
