@@ -107,8 +107,9 @@ extern "C" fn check_half_child() {
 /// half 0. True when `this_test` belongs to the other process (the caller returns at once). A
 /// failure in the child fails this binary at exit with the child's output (libtest has already
 /// listed the half-1 tests as passed here; their results are the child's).
-pub fn in_other_half(this_test: &str, half: u8) -> bool {
-    assert!(half < 2, "{this_test}: half must be 0 or 1");
+#[track_caller]
+pub fn in_other_half(half: u8) -> bool {
+    assert!(half < 2, "half must be 0 or 1, not {half}");
     if std::env::var_os("DISPFLOW_HALF").is_some() {
         return half != 1;
     }

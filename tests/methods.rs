@@ -35,19 +35,29 @@ fn variant(rep: Rep, kind: Kind) -> TrainConfig {
     c
 }
 
-/// Every method (and the reverse order, the paper's other decomposition), then every switch;
-/// name, configuration, whether it has a motion term.
-fn cases() -> Vec<(&'static str, TrainConfig, bool)> {
-    let mut cases: Vec<(&str, TrainConfig, bool)> = vec![
+/// Case: name, configuration, whether it has a motion term.
+type Case = (&'static str, TrainConfig, bool);
+
+/// Every method, and the reverse order (the paper's other decomposition).
+fn methods() -> Vec<Case> {
+    let mut c = with(Method::Dispflow);
+    c.motion_order = MotionOrder::Reverse;
+    vec![
         ("3dgs", with(Method::Gs3d), false),
         ("deformable-3dgs", with(Method::Deformable3dgs), false),
         ("motiongs", with(Method::Motiongs), true),
         ("dispflow", with(Method::Dispflow), true),
-    ];
-    let mut c = with(Method::Dispflow);
-    c.motion_order = MotionOrder::Reverse;
-    cases.push(("reverse order", c, true));
-    cases.extend([
+        ("reverse order", c, true),
+    ]
+}
+
+/// Every ablation switch of DispFlow-GS.
+fn switches() -> Vec<Case> {
+    let mut off = with(Method::Dispflow);
+    off.motion_schedule = MotionSchedule::Off;
+    let mut mask = with(Method::Dispflow);
+    mask.scene_motion.mask_px = 0.05;
+    vec![
         (
             "gaussian flow + direct",
             variant(Rep::GaussianFlow, Kind::Direct),
@@ -68,14 +78,9 @@ fn cases() -> Vec<(&'static str, TrainConfig, bool)> {
             variant(Rep::Displacement, Kind::None),
             true,
         ),
-    ]);
-    let mut c = with(Method::Dispflow);
-    c.motion_schedule = MotionSchedule::Off;
-    cases.push(("schedule off", c, true));
-    let mut c = with(Method::Dispflow);
-    c.scene_motion.mask_px = 0.05;
-    cases.push(("motion mask", c, true));
-    cases
+        ("schedule off", off, true),
+        ("motion mask", mask, true),
+    ]
 }
 
 /// The binary's tests train one after another on one device; they split over two processes
@@ -86,26 +91,23 @@ const SWITCHES: u8 = 1;
 
 #[test]
 fn every_method_trains_with_a_motion_gradient_where_it_has_one() {
-    if testing::in_other_half(
-        "every_method_trains_with_a_motion_gradient_where_it_has_one",
-        METHODS,
-    ) {
+    if testing::in_other_half(METHODS) {
         return;
     }
-    train_cases(&cases()[..5]);
+    train_cases(&methods());
 }
 
 #[test]
 fn every_switch_trains_with_a_motion_gradient() {
-    if testing::in_other_half("every_switch_trains_with_a_motion_gradient", SWITCHES) {
+    if testing::in_other_half(SWITCHES) {
         return;
     }
-    train_cases(&cases()[5..]);
+    train_cases(&switches());
 }
 
 /// A few steps of each case: finite loss and MLP parameters, and a motion gradient into the
 /// MLP (finite, non-zero) exactly where the case has a motion term.
-fn train_cases(cases: &[(&str, TrainConfig, bool)]) {
+fn train_cases(cases: &[Case]) {
     let tmp = tempfile::tempdir().unwrap();
     let ds = tiny_dataset(tmp.path());
     let gpu = testing::serial_gpu();
@@ -149,10 +151,7 @@ fn train_cases(cases: &[(&str, TrainConfig, bool)]) {
 
 #[test]
 fn schedule_off_gives_the_full_weight_from_the_warm_up() {
-    if testing::in_other_half(
-        "schedule_off_gives_the_full_weight_from_the_warm_up",
-        METHODS,
-    ) {
+    if testing::in_other_half(METHODS) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -180,7 +179,7 @@ fn schedule_off_gives_the_full_weight_from_the_warm_up() {
 
 #[test]
 fn refused_combinations_name_their_field() {
-    if testing::in_other_half("refused_combinations_name_their_field", SWITCHES) {
+    if testing::in_other_half(SWITCHES) {
         return;
     }
     let mut cases = Vec::new();
@@ -207,7 +206,7 @@ fn refused_combinations_name_their_field() {
 
 #[test]
 fn methods_have_the_papers_row_names() {
-    if testing::in_other_half("methods_have_the_papers_row_names", SWITCHES) {
+    if testing::in_other_half(SWITCHES) {
         return;
     }
     assert_eq!(row_name(&with(Method::Gs3d)), "3DGS");

@@ -13,7 +13,7 @@ mod train_common;
 
 #[test]
 fn motion_step_changes_the_deformation_in_both_orders() {
-    if testing::in_other_half("motion_step_changes_the_deformation_in_both_orders", 0) {
+    if testing::in_other_half(0) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -81,7 +81,7 @@ fn motion_step_changes_the_deformation_in_both_orders() {
 /// counted as the Gaussians').
 #[test]
 fn every_kernel_of_a_timed_step_names_its_zone() {
-    if testing::in_other_half("every_kernel_of_a_timed_step_names_its_zone", 1) {
+    if testing::in_other_half(1) {
         return;
     }
     use dispflow_vk::model::nodes::FieldKind;

@@ -18,7 +18,7 @@ mod train_common;
 
 #[test]
 fn resume_reproduces_an_uninterrupted_run() {
-    if testing::in_other_half("resume_reproduces_an_uninterrupted_run", 1) {
+    if testing::in_other_half(1) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -59,7 +59,7 @@ fn resume_reproduces_an_uninterrupted_run() {
 
 #[test]
 fn evaluating_mid_run_does_not_change_training() {
-    if testing::in_other_half("evaluating_mid_run_does_not_change_training", 0) {
+    if testing::in_other_half(0) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -93,7 +93,7 @@ fn evaluating_mid_run_does_not_change_training() {
 /// resumes bit-identically.
 #[test]
 fn split_checkpoint_resumes_bit_identically() {
-    if testing::in_other_half("split_checkpoint_resumes_bit_identically", 1) {
+    if testing::in_other_half(1) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -142,7 +142,7 @@ fn split_checkpoint_resumes_bit_identically() {
 /// the written rows) differs between them, or turns the NaN run's numbers into NaN.
 #[test]
 fn memory_nothing_wrote_changes_nothing() {
-    if testing::in_other_half("memory_nothing_wrote_changes_nothing", 0) {
+    if testing::in_other_half(0) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();

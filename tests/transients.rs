@@ -34,10 +34,7 @@ fn cfg() -> TrainConfig {
 
 #[test]
 fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
-    if testing::in_other_half(
-        "transients_spawn_stay_last_and_learn_only_their_own_sections",
-        1,
-    ) {
+    if testing::in_other_half(1) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -144,10 +141,7 @@ fn transients_spawn_stay_last_and_learn_only_their_own_sections() {
 /// restored split trainer steps exactly as the one it was taken from.
 #[test]
 fn the_split_covers_the_canonical_rows_and_composes_with_transients() {
-    if testing::in_other_half(
-        "the_split_covers_the_canonical_rows_and_composes_with_transients",
-        1,
-    ) {
+    if testing::in_other_half(1) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -214,10 +208,7 @@ fn the_split_covers_the_canonical_rows_and_composes_with_transients() {
 
 #[test]
 fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full() {
-    if testing::in_other_half(
-        "transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full",
-        1,
-    ) {
+    if testing::in_other_half(1) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -255,10 +246,7 @@ fn transients_spawn_into_free_rows_beyond_their_share_until_the_budget_is_full()
 
 #[test]
 fn a_transient_run_writes_reopens_and_exports_its_transients() {
-    if testing::in_other_half(
-        "a_transient_run_writes_reopens_and_exports_its_transients",
-        0,
-    ) {
+    if testing::in_other_half(0) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -397,10 +385,7 @@ fn walk(d: &std::path::Path, ext: &str) -> Vec<std::path::PathBuf> {
 /// the same either way (the term reaches v through the drawn mean and v·(t2 − t1)).
 #[test]
 fn detached_motion_weights_leave_the_time_gradients_to_the_photometric_render() {
-    if testing::in_other_half(
-        "detached_motion_weights_leave_the_time_gradients_to_the_photometric_render",
-        1,
-    ) {
+    if testing::in_other_half(1) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -482,7 +467,7 @@ fn detached_motion_weights_leave_the_time_gradients_to_the_photometric_render() 
 /// row is kept for transients before the first spawn.
 #[test]
 fn auto_spawns_once_a_residual_has_held_through_the_gate() {
-    if testing::in_other_half("auto_spawns_once_a_residual_has_held_through_the_gate", 0) {
+    if testing::in_other_half(0) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -602,7 +587,7 @@ fn auto_spawns_once_a_residual_has_held_through_the_gate() {
 /// run without transients (the rounds only look; no row, no reserve, no state changes).
 #[test]
 fn auto_with_a_closed_gate_trains_exactly_as_off() {
-    if testing::in_other_half("auto_with_a_closed_gate_trains_exactly_as_off", 1) {
+    if testing::in_other_half(1) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -641,7 +626,7 @@ fn auto_with_a_closed_gate_trains_exactly_as_off() {
 /// Which one is kept (the most opaque) is `resolve`'s unit test; here the trainer's wiring.
 #[test]
 fn resolve_keeps_one_depth_hypothesis_per_pixel() {
-    if testing::in_other_half("resolve_keeps_one_depth_hypothesis_per_pixel", 1) {
+    if testing::in_other_half(1) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -710,10 +695,7 @@ fn resolve_keeps_one_depth_hypothesis_per_pixel() {
 /// spawn at 60 and before its resolution at 90.
 #[test]
 fn a_transient_run_resumed_between_spawns_trains_as_the_uninterrupted_one() {
-    if testing::in_other_half(
-        "a_transient_run_resumed_between_spawns_trains_as_the_uninterrupted_one",
-        0,
-    ) {
+    if testing::in_other_half(0) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
