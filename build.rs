@@ -15,6 +15,8 @@ struct Binding {
     binding: u32,
     name: String,
     uniform: bool,
+    /// Raw `VkFormat` of a storage texel buffer (`imageBuffer`), 0 for a buffer block.
+    texel_format: u32,
     readonly: bool,
     writeonly: bool,
 }
@@ -134,8 +136,8 @@ fn main() {
             for b in &r.bindings {
                 writeln!(
                     code,
-                    "            BindingInfo {{ binding: {}, name: {:?}, uniform: {}, readonly: {}, writeonly: {} }},",
-                    b.binding, b.name, b.uniform, b.readonly, b.writeonly
+                    "            BindingInfo {{ binding: {}, name: {:?}, uniform: {}, texel_format: {}, readonly: {}, writeonly: {} }},",
+                    b.binding, b.name, b.uniform, b.texel_format, b.readonly, b.writeonly
                 )
                 .unwrap();
             }
@@ -200,12 +202,18 @@ fn reflect(rel: &str, bytes: &[u8]) -> Reflected {
             "{rel}: only descriptor set 0 is used (push descriptors)"
         );
         for (binding, info) in binds {
-            let uniform = match info.ty {
-                rspirv_reflect::DescriptorType::STORAGE_BUFFER => false,
-                rspirv_reflect::DescriptorType::UNIFORM_BUFFER => true,
-                t => panic!("{rel}: binding {binding}: only buffers are supported, found {t:?}"),
-            };
             let var = find_binding_var(m, *binding).unwrap();
+            let (uniform, texel_format) = match info.ty {
+                rspirv_reflect::DescriptorType::STORAGE_BUFFER => (false, 0),
+                rspirv_reflect::DescriptorType::UNIFORM_BUFFER => (true, 0),
+                rspirv_reflect::DescriptorType::STORAGE_TEXEL_BUFFER => {
+                    (false, texel_format(m, var, rel, *binding))
+                }
+                t => panic!(
+                    "{rel}: binding {binding}: only buffers and storage texel buffers \
+                     (imageBuffer) are supported, found {t:?}"
+                ),
+            };
             let (readonly, writeonly) = access(m, var);
             // Anonymous blocks (`buffer Keys { .. };`) have no instance name: use the block's.
             let name = if info.name.is_empty() {
@@ -219,6 +227,7 @@ fn reflect(rel: &str, bytes: &[u8]) -> Reflected {
                 binding: *binding,
                 name,
                 uniform,
+                texel_format,
                 readonly,
                 writeonly,
             });
@@ -270,6 +279,33 @@ fn pointee_struct(m: &Module, var: u32) -> Option<u32> {
     match p.operands.get(1) {
         Some(Operand::IdRef(s)) => Some(*s),
         _ => None,
+    }
+}
+
+/// The `VkFormat` of an `imageBuffer` variable, from its image type's format qualifier.
+fn texel_format(m: &Module, var: u32, rel: &str, binding: u32) -> u32 {
+    use rspirv_reflect::rspirv::spirv::ImageFormat as F;
+    let img = pointee_struct(m, var).and_then(|t| {
+        m.types_global_values
+            .iter()
+            .find(|i| i.result_id == Some(t) && i.class.opcode == Op::TypeImage)
+    });
+    let fmt = img.and_then(|i| match i.operands.get(6) {
+        Some(Operand::ImageFormat(f)) => Some(*f),
+        _ => None,
+    });
+    // Raw VkFormat values (the build script does not depend on ash).
+    match fmt {
+        Some(F::R32f) => 100,
+        Some(F::R32ui) => 98,
+        Some(F::R32i) => 99,
+        Some(F::Rg32f) => 103,
+        Some(F::Rgba32f) => 109,
+        Some(F::Rgba32ui) => 107,
+        f => panic!(
+            "{rel}: binding {binding}: imageBuffer format {f:?}: expected r32f, r32ui, r32i, \
+             rg32f, rgba32f or rgba32ui"
+        ),
     }
 }
 

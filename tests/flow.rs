@@ -10,9 +10,10 @@
 
 use dispflow_vk::data::synthetic::{render_view, GenCamera, Scene};
 use dispflow_vk::kernels::flow::{FlowConfig, FlowEstimator, TvL1Flow};
+use dispflow_vk::kernels::shape::Access;
 use dispflow_vk::reference::flow::tvl1_flow;
 use dispflow_vk::testing::{self, Noise};
-use dispflow_vk::vk::Recorder;
+use dispflow_vk::vk::{Gpu, Recorder};
 
 const MARGIN: usize = 6;
 
@@ -139,6 +140,23 @@ fn gpu_flow(cfg: FlowConfig, w: u32, h: u32, a: &[[f32; 4]], b: &[[f32; 4]]) -> 
     gpu_flow_timed(cfg, w, h, a, b).0
 }
 
+/// Both array-access shapes (storage buffers, texel buffers) of every stage that has two.
+const ACCESSES: [Access; 2] = [Access::Buffer, Access::Texel];
+
+/// Flow in one array-access shape.
+fn gpu_flow_in(
+    access: Access,
+    cfg: FlowConfig,
+    w: u32,
+    h: u32,
+    a: &[[f32; 4]],
+    b: &[[f32; 4]],
+) -> Vec<[f32; 2]> {
+    let gpu = testing::gpu();
+    let est = TvL1Flow::with_access(&gpu, cfg, access).unwrap();
+    run_flow(&gpu, &est, w, h, a, b).0
+}
+
 /// Flow on the test device, scratch and output pre-filled with noise; also the GPU time (ms).
 fn gpu_flow_timed(
     cfg: FlowConfig,
@@ -149,15 +167,26 @@ fn gpu_flow_timed(
 ) -> (Vec<[f32; 2]>, f64) {
     let gpu = testing::gpu();
     let est = TvL1Flow::new(&gpu, cfg).unwrap();
-    let s = est.scratch(&gpu, w, h).unwrap();
+    run_flow(&gpu, &est, w, h, a, b)
+}
+
+fn run_flow(
+    gpu: &Gpu,
+    est: &TvL1Flow,
+    w: u32,
+    h: u32,
+    a: &[[f32; 4]],
+    b: &[[f32; 4]],
+) -> (Vec<[f32; 2]>, f64) {
+    let s = est.scratch(gpu, w, h).unwrap();
     for (i, buf) in s.buffers().into_iter().enumerate() {
-        testing::fill_noise(&gpu, buf, 100 + i as u64);
+        testing::fill_noise(gpu, buf, 100 + i as u64);
     }
     let ab = gpu.buffer_from("flow test a", a).unwrap();
     let bb = gpu.buffer_from("flow test b", b).unwrap();
     let out = gpu.buffer("flow test out", (w * h) as u64 * 8).unwrap();
-    testing::fill_noise(&gpu, &out, 7);
-    let mut rec = Recorder::timed(&gpu).unwrap();
+    testing::fill_noise(gpu, &out, 7);
+    let mut rec = Recorder::timed(gpu).unwrap();
     est.record(&mut rec, &s, ab.all(), bb.all(), out.all());
     let t = rec.finish().unwrap();
     (
@@ -221,12 +250,17 @@ fn gpu_matches_twin() {
         (4, 96, 40),
     ] {
         let (a, b, _) = translation(w, h, seed, [1.3, -0.8]);
-        let got = gpu_flow(cfg, w as u32, h as u32, &a, &b);
         let want = tvl1_flow(&cfg, &a, &b, w, h);
-        let (mean, max) = (epe(&got, &want, w, h, 0), max_diff(&got, &want));
-        eprintln!("{w}x{h}: GPU vs twin mean |Δ| {mean:.2e} px, max {max:.2e} px");
-        assert!(got.iter().all(|p| p[0].is_finite() && p[1].is_finite()));
-        assert!(mean < 1e-4 && max < 1e-2, "{w}x{h}: mean {mean}, max {max}");
+        for access in ACCESSES {
+            let got = gpu_flow_in(access, cfg, w as u32, h as u32, &a, &b);
+            let (mean, max) = (epe(&got, &want, w, h, 0), max_diff(&got, &want));
+            eprintln!("{w}x{h} {access:?}: GPU vs twin mean |Δ| {mean:.2e} px, max {max:.2e} px");
+            assert!(got.iter().all(|p| p[0].is_finite() && p[1].is_finite()));
+            assert!(
+                mean < 1e-4 && max < 1e-2,
+                "{w}x{h} {access:?}: mean {mean}, max {max}"
+            );
+        }
     }
 }
 
@@ -241,15 +275,17 @@ fn gpu_matches_twin_tightly_after_few_iterations() {
     };
     let (w, h) = (33, 21);
     let (a, b, _) = translation(w, h, 9, [0.6, 0.4]);
-    let got = gpu_flow(cfg, w as u32, h as u32, &a, &b);
     let want = tvl1_flow(&cfg, &a, &b, w, h);
-    let max = got
-        .iter()
-        .zip(&want)
-        .map(|(g, t)| (g[0] as f64 - t[0]).abs().max((g[1] as f64 - t[1]).abs()))
-        .fold(0.0, f64::max);
-    eprintln!("one level, 1 warp, 3 iterations: max |Δ| {max:.2e} px");
-    assert!(max < 1e-4, "max {max}");
+    for access in ACCESSES {
+        let got = gpu_flow_in(access, cfg, w as u32, h as u32, &a, &b);
+        let max = got
+            .iter()
+            .zip(&want)
+            .map(|(g, t)| (g[0] as f64 - t[0]).abs().max((g[1] as f64 - t[1]).abs()))
+            .fold(0.0, f64::max);
+        eprintln!("one level, 1 warp, 3 iterations, {access:?}: max |Δ| {max:.2e} px");
+        assert!(max < 1e-4, "{access:?}: max {max}");
+    }
 }
 
 fn check_epe(name: &str, w: usize, h: usize, p: Pair, cfg: FlowConfig, bound: f64) {
@@ -490,11 +526,13 @@ fn odd_sizes_and_pyramid() {
     );
     for (w, h) in [(2usize, 1usize), (5, 3), (17, 13), (96, 40)] {
         let (a, b, _) = translation(w, h, 21, [0.5, 0.25]);
-        let g = gpu_flow(cfg, w as u32, h as u32, &a, &b);
         let t = tvl1_flow(&cfg, &a, &b, w, h);
-        assert!(g.iter().flatten().all(|v| v.is_finite()), "{w}x{h}");
-        let d = epe(&g, &t, w, h, 0);
-        assert!(d < 1e-4, "{w}x{h}: GPU vs twin {d}");
+        for access in ACCESSES {
+            let g = gpu_flow_in(access, cfg, w as u32, h as u32, &a, &b);
+            assert!(g.iter().flatten().all(|v| v.is_finite()), "{w}x{h}");
+            let d = epe(&g, &t, w, h, 0);
+            assert!(d < 1e-4, "{w}x{h} {access:?}: GPU vs twin {d}");
+        }
     }
 }
 
@@ -620,18 +658,20 @@ fn knobs_match_twin() {
             if cfg.finest as usize >= dims.len() {
                 continue;
             }
-            let got = gpu_flow(cfg, w as u32, h as u32, &a, &b);
             let want = tvl1_flow(&cfg, &a, &b, w, h);
-            let (mean, max) = (epe(&got, &want, w, h, 0), max_diff(&got, &want));
-            eprintln!(
-                "blur {} texture {} finest {} {w}x{h}: GPU vs twin mean {mean:.2e} px, max {max:.2e} px",
-                cfg.blur_a, cfg.texture, cfg.finest
-            );
-            assert!(got.iter().all(|p| p[0].is_finite() && p[1].is_finite()));
-            assert!(
-                mean < 1e-4 && max < 1e-2,
-                "{cfg:?} {w}x{h}: mean {mean}, max {max}"
-            );
+            for access in ACCESSES {
+                let got = gpu_flow_in(access, cfg, w as u32, h as u32, &a, &b);
+                let (mean, max) = (epe(&got, &want, w, h, 0), max_diff(&got, &want));
+                eprintln!(
+                    "blur {} texture {} finest {} {w}x{h} {access:?}: GPU vs twin mean {mean:.2e} px, max {max:.2e} px",
+                    cfg.blur_a, cfg.texture, cfg.finest
+                );
+                assert!(got.iter().all(|p| p[0].is_finite() && p[1].is_finite()));
+                assert!(
+                    mean < 1e-4 && max < 1e-2,
+                    "{cfg:?} {w}x{h} {access:?}: mean {mean}, max {max}"
+                );
+            }
         }
     }
 }

@@ -2,7 +2,7 @@
 //! images (values and gradient), and the extremes (identical, flat, 1×1 images); the GPU
 //! checks run both blur shapes (one pixel per invocation, the CPU devices' runs of 16).
 
-use dispflow_vk::kernels::loss::{BlurShape, PhotometricLoss};
+use dispflow_vk::kernels::loss::{Access, BlurShape, PhotometricLoss};
 use dispflow_vk::reference::loss::{photometric_loss, photometric_loss_f64};
 use dispflow_vk::testing::{self, Noise};
 use dispflow_vk::vk::Recorder;
@@ -49,17 +49,22 @@ fn twin_gradient_matches_finite_differences() {
     eprintln!("worst relative FD error {worst:.2e}");
 }
 
-const SHAPES: [BlurShape; 2] = [BlurShape::Pixel, BlurShape::Rows];
+/// Every blur shape, the rows blur through storage and through texel buffers.
+const SHAPES: [(BlurShape, Access); 3] = [
+    (BlurShape::Pixel, Access::Buffer),
+    (BlurShape::Rows, Access::Buffer),
+    (BlurShape::Rows, Access::Texel),
+];
 
 fn gpu_loss(
     w: u32,
     h: u32,
     x: &[[f32; 4]],
     y: &[[f32; 4]],
-    blur: BlurShape,
+    (blur, access): (BlurShape, Access),
 ) -> (dispflow_vk::kernels::loss::LossValues, Vec<[f32; 4]>) {
     let gpu = testing::gpu();
-    let loss = PhotometricLoss::with_blur(&gpu, blur).unwrap();
+    let loss = PhotometricLoss::with_shapes(&gpu, blur, access).unwrap();
     let mut b = loss.buffers(&gpu, w, h).unwrap();
     let xb = gpu.buffer_from("render", x).unwrap();
     let yb = gpu.buffer_from("target", y).unwrap();
@@ -124,7 +129,7 @@ fn identical_and_flat_images_are_finite() {
     }
 }
 
-fn identical_and_flat(blur: BlurShape) {
+fn identical_and_flat(blur: (BlurShape, Access)) {
     let (w, h) = (23, 19);
     let x = image(9, w * h);
     let (v, g) = gpu_loss(w as u32, h as u32, &x, &x, blur);

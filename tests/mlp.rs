@@ -19,7 +19,7 @@
 
 use dispflow_vk::kernels::mlp::{Mlp, MlpBuffers, MlpTime};
 use dispflow_vk::kernels::mlp_fused::{MlpFused, Precision};
-use dispflow_vk::kernels::mlp_rows::{DeviceShape, MlpKernels};
+use dispflow_vk::kernels::mlp_rows::{Access, DeviceShape, MlpKernels};
 use dispflow_vk::model::deform::{MlpConfig, MlpLayout, TimeEncoding};
 use dispflow_vk::reference::mlp::{self as twin, Activations, Times};
 use dispflow_vk::testing::{self, assert_close, Noise, Tol};
@@ -168,6 +168,11 @@ fn check_layerwise(gpu: &Gpu, c: &Case, backward: bool, kernels: MlpKernels) -> 
     check_layerwise_bound(gpu, c, backward, kernels, None)
 }
 
+/// [`check_layerwise`] with the register path's rows through `access`.
+fn check_layerwise_in(gpu: &Gpu, c: &Case, kernels: MlpKernels, access: Access) -> (f64, f64) {
+    check_layerwise_shaped(gpu, c, true, (kernels, access), None)
+}
+
 /// [`check_layerwise`] with at most `binding` bytes bound per activation tensor (chunks).
 fn check_layerwise_bound(
     gpu: &Gpu,
@@ -176,7 +181,18 @@ fn check_layerwise_bound(
     kernels: MlpKernels,
     binding: Option<u64>,
 ) -> (f64, f64) {
-    let mlp = Mlp::with_kernels(gpu, &c.lay.cfg, kernels).unwrap();
+    let access = Access::for_device(&gpu.info);
+    check_layerwise_shaped(gpu, c, backward, (kernels, access), binding)
+}
+
+fn check_layerwise_shaped(
+    gpu: &Gpu,
+    c: &Case,
+    backward: bool,
+    (kernels, access): (MlpKernels, Access),
+    binding: Option<u64>,
+) -> (f64, f64) {
+    let mlp = Mlp::with_shapes(gpu, &c.lay.cfg, kernels, access).unwrap();
     let cap = c.n.max(1) as u32;
     let b = match binding {
         Some(bytes) => {
@@ -305,6 +321,17 @@ fn layerwise_small_configs_match_twin() {
                 eprintln!(
                     "{kern:?} 4x64 time_net={tn} n={n}: fwd {ef:.2e}, bwd {eb:.2e} (normwise)"
                 );
+            }
+            // The register path's other array access (storage buffers on a CPU device,
+            // texel buffers on a GPU), on the batches below the large one.
+            if n <= 4096 && !testing::subgroup_rerun() {
+                let other = match Access::for_device(&gpu.info) {
+                    Access::Texel => Access::Buffer,
+                    Access::Buffer => Access::Texel,
+                };
+                let c = Case::new(small(tn), n, 10 + k as u64, 1.5, k % 2 == 1);
+                let (ef, eb) = check_layerwise_in(&gpu, &c, MlpKernels::Rows, other);
+                eprintln!("Rows {other:?} 4x64 time_net={tn} n={n}: fwd {ef:.2e}, bwd {eb:.2e}");
             }
         }
     }

@@ -45,7 +45,7 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
     let up = Uploaded::new(&gpu, &scene);
     // Every forward variant, and every backward variant after each (the backward reads the
     // forward's final T and last contributors).
-    for (fv, b, out) in render_each(&gpu, &mut rast, &cam, &up, &opts) {
+    for (fv, b, out) in render_each_access(&gpu, &mut rast, &cam, &up, &opts) {
         let ctx = format!(
             "seed {seed}, n {n}, {w}x{h}, sh {sh_degree}, k {k}, blend_fwd {}",
             fv.name()
@@ -181,7 +181,7 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
         let u = upstream(seed + 100, px, k as usize);
         let bg = twin_blend_bwd(&bp, &proj, &scene.features, &fwd, &u);
         let pg = twin::project_bwd(&tcam, &g, &proj, &bg);
-        for (v, grads) in backward_each(&gpu, &mut rast, &b, &cam, &up, &opts, &u) {
+        for (v, grads) in backward_each_access(&gpu, &mut rast, &b, &cam, &up, &opts, &u) {
             let ctx = format!("{ctx}, blend_bwd {}", v.name());
             check_grads(&ctx, n, &grads, &bg, &pg, opts.abs_grad);
         }

@@ -1,39 +1,4 @@
 #version 460
-// blur_h for CPU devices: one invocation blurs a run of BLUR_RUN pixels of one row, from the
-// run and its 2·SSIM_RADIUS neighbours held in a private array: 26 loads per 16 outputs
-// instead of 11 per output (on lavapipe each storage load is a per-lane loop). The taps are
-// summed in blur_h's order, so both shapes give the same floats. GPUs keep blur_h (one pixel
-// per invocation, coalesced).
+// blur_h for CPU devices, storage buffers; body and notes in blur_h_rows.glsl.
 #extension GL_GOOGLE_include_directive : require
-#include "common.glsl"
-#include "params.glsl"
-#include "loss.glsl"
-
-layout(local_size_x = 64) in;
-
-layout(push_constant) uniform Push { LossParams pc; };
-layout(std430, binding = 0) readonly buffer Src { float src[]; };
-layout(std430, binding = 1) writeonly buffer Dst { float dst[]; };
-
-void main() {
-    uint id = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    uint runs = (pc.width + uint(BLUR_RUN) - 1u) / uint(BLUR_RUN);
-    if (id >= runs * pc.height * pc.planes) return;
-    uint row = id / runs; // plane · height + y
-    int x0 = int(id % runs) * BLUR_RUN;
-    uint base = row * pc.width;
-    float v[BLUR_RUN + 2 * SSIM_RADIUS];
-    for (int i = 0; i < BLUR_RUN + 2 * SSIM_RADIUS; ++i) {
-        int xx = x0 - SSIM_RADIUS + i;
-        bool inside = xx >= 0 && xx < int(pc.width);
-        v[i] = inside ? src[base + uint(clamp(xx, 0, int(pc.width) - 1))] : 0.0;
-    }
-    for (int o = 0; o < BLUR_RUN; ++o) {
-        float acc = 0.0;
-        for (int d = -SSIM_RADIUS; d <= SSIM_RADIUS; ++d) {
-            // blur_h skips a zero tap outside the image; adding 0 changes no float.
-            acc += gauss_tap(d) * v[o + SSIM_RADIUS + d];
-        }
-        if (x0 + o < int(pc.width)) dst[base + uint(x0 + o)] = acc;
-    }
-}
+#include "blur_h_rows.glsl"

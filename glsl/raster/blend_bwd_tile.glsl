@@ -94,16 +94,16 @@ void main() {
         uvec2 pix = origin + uvec2(q % TILE, q / TILE);
         bool inside = pix.x < pc.width && pix.y < pc.height;
         uint p = inside ? pix.y * pc.width + pix.x : 0u;
-        T[i] = inside ? final_t[p] : 1.0;
-        last[i] = inside ? n_contrib[p] : 0u; // 0: never live
-        g_out[i] = inside ? d_rgba[p] : vec4(0.0);
-        g_depth[i] = inside ? d_depth[p] : 0.0;
+        T[i] = inside ? LD1(final_t, p) : 1.0;
+        last[i] = inside ? LDU1(n_contrib, p) : 0u; // 0: never live
+        g_out[i] = inside ? LD4(d_rgba, p) : vec4(0.0);
+        g_depth[i] = inside ? LD1(d_depth, p) : 0.0;
         R_rgb[i] = pc.background.rgb;
         R_a[i] = 0.0;
         R_d[i] = 0.0;
 #if FEAT > 0
         for (int c = 0; c < FEAT; ++c) {
-            g_f[i * FEAT + c] = inside ? d_feat[p * FEAT + c] : 0.0;
+            g_f[i * FEAT + c] = inside ? LD1(d_feat, p * FEAT + c) : 0.0;
             R_f[i * FEAT + c] = 0.0;
         }
 #endif
@@ -121,9 +121,9 @@ void main() {
         bool found = false;
         while (j > range.x) {
             --j;
-            gid = ids[j];
-            a = splats[SPLAT_STRIDE * gid];
-            c4 = splats[SPLAT_STRIDE * gid + 2];
+            gid = LDU1(ids, j);
+            a = LD4(splats, SPLAT_STRIDE * gid);
+            c4 = LD4(splats, SPLAT_STRIDE * gid + 2);
             if (a.y + c4.w >= row_lo && a.y - c4.w <= row_hi) {
                 found = true;
                 break;
@@ -131,11 +131,11 @@ void main() {
         }
         if (!found) break;
         uint rel = j - range.x; // 0-based position in the tile's list
-        vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
+        vec3 con = LD4(splats, SPLAT_STRIDE * gid + 1).xyz;
         vec3 col = c4.rgb;
 #if FEAT > 0
         float f[FEAT];
-        for (int c = 0; c < FEAT; ++c) f[c] = feat[gid * FEAT + c];
+        for (int c = 0; c < FEAT; ++c) f[c] = LD1(feat, gid * FEAT + c);
         float gfe[FEAT];
         for (int c = 0; c < FEAT; ++c) gfe[c] = 0.0;
 #endif
@@ -175,14 +175,14 @@ void main() {
     // over the lanes on llvmpipe: one per batch instead of one per splat).
     for (uint jb = end; jb > range.x; jb -= min(S, jb - range.x)) {
         uint nb = min(S, jb - range.x);
-        uint g_l = ids[jb - 1u - min(lane, nb - 1u)];
-        vec4 a_l = splats[SPLAT_STRIDE * g_l];
-        vec4 n_l = splats[SPLAT_STRIDE * g_l + 1];
-        vec4 c_l = splats[SPLAT_STRIDE * g_l + 2];
+        uint g_l = LDU1(ids, jb - 1u - min(lane, nb - 1u));
+        vec4 a_l = LD4(splats, SPLAT_STRIDE * g_l);
+        vec4 n_l = LD4(splats, SPLAT_STRIDE * g_l + 1);
+        vec4 c_l = LD4(splats, SPLAT_STRIDE * g_l + 2);
 #if FEAT > 0
         float f_l[FEAT], s_f[FEAT];
         for (int c = 0; c < FEAT; ++c) {
-            f_l[c] = feat[g_l * FEAT + c];
+            f_l[c] = LD1(feat, g_l * FEAT + c);
             s_f[c] = 0.0;
         }
 #endif

@@ -89,20 +89,20 @@ void main() {
         vec4 a = vec4(0.0), c4 = vec4(0.0);
         bool found = false;
         for (; j < range.y; ++j) {
-            gid = ids[j];
-            a = splats[SPLAT_STRIDE * gid];
-            c4 = splats[SPLAT_STRIDE * gid + 2];
+            gid = LDU1(ids, j);
+            a = LD4(splats, SPLAT_STRIDE * gid);
+            c4 = LD4(splats, SPLAT_STRIDE * gid + 2);
             if (a.y + c4.w >= row_lo && a.y - c4.w <= row_hi) {
                 found = true;
                 break;
             }
         }
         if (!found) break;
-        vec3 con = splats[SPLAT_STRIDE * gid + 1].xyz;
+        vec3 con = LD4(splats, SPLAT_STRIDE * gid + 1).xyz;
         vec3 col = c4.rgb;
 #if FEAT > 0
         float f[FEAT];
-        for (int c = 0; c < FEAT; ++c) f[c] = feat[gid * FEAT + c];
+        for (int c = 0; c < FEAT; ++c) f[c] = LD1(feat, gid * FEAT + c);
 #endif
         uint seen = j - range.x + 1u;
 #include "blend_fwd_splat.glsl"
@@ -118,13 +118,13 @@ void main() {
     for (; jb < range.y; jb += S) {
         if (subgroupAll(live == 0u)) break;
         uint nb = min(S, range.y - jb);
-        uint g_l = ids[jb + min(lane, nb - 1u)];
-        vec4 a_l = splats[SPLAT_STRIDE * g_l];
-        vec4 n_l = splats[SPLAT_STRIDE * g_l + 1];
-        vec4 c_l = splats[SPLAT_STRIDE * g_l + 2];
+        uint g_l = LDU1(ids, jb + min(lane, nb - 1u));
+        vec4 a_l = LD4(splats, SPLAT_STRIDE * g_l);
+        vec4 n_l = LD4(splats, SPLAT_STRIDE * g_l + 1);
+        vec4 c_l = LD4(splats, SPLAT_STRIDE * g_l + 2);
 #if FEAT > 0
         float f_l[FEAT];
-        for (int c = 0; c < FEAT; ++c) f_l[c] = feat[g_l * FEAT + c];
+        for (int c = 0; c < FEAT; ++c) f_l[c] = LD1(feat, g_l * FEAT + c);
 #endif
         // A loop that tests at its end: lavapipe's loop budget counts one iteration per splat,
         // where a loop that tests first would count one more per batch.
@@ -150,12 +150,12 @@ void main() {
         uvec2 pix = origin + uvec2(q % TILE, q / TILE);
         if (pix.x >= pc.width || pix.y >= pc.height) continue;
         uint p = pix.y * pc.width + pix.x;
-        out_rgba[p] = vec4(C[i] + T[i] * pc.background.rgb, 1.0 - T[i]);
-        out_depth[p] = D[i];
-        final_t[p] = T[i];
-        n_contrib[p] = last[i];
+        ST4(out_rgba, p, vec4(C[i] + T[i] * pc.background.rgb, 1.0 - T[i]));
+        ST1(out_depth, p, D[i]);
+        ST1(final_t, p, T[i]);
+        STU1(n_contrib, p, last[i]);
 #if FEAT > 0
-        for (int c = 0; c < FEAT; ++c) out_feat[p * FEAT + c] = F[i * FEAT + c];
+        for (int c = 0; c < FEAT; ++c) ST1(out_feat, p * FEAT + c, F[i * FEAT + c]);
 #endif
     }
 }

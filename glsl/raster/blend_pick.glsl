@@ -20,9 +20,9 @@ bool band_tile(uint tile_y, uvec2 range) {
     float y0 = float(tile_y * TILE);
     uint cover = 0u; // bands reached, summed over the sample
     for (uint k = 0u; k < s; ++k) {
-        uint gid = ids[range.x + (k * n) / s];
-        float y = splats[SPLAT_STRIDE * gid].y;
-        float reach = splats[SPLAT_STRIDE * gid + 2].w;
+        uint gid = LDU1(ids, range.x + (k * n) / s);
+        float y = LD4(splats, SPLAT_STRIDE * gid).y;
+        float reach = LD4(splats, SPLAT_STRIDE * gid + 2).w;
         for (uint b = 0u; b < 4u; ++b) {
             float lo = y0 + float(4u * b) + 0.5, hi = lo + 3.0;
             cover += (y + reach >= lo && y - reach <= hi) ? 1u : 0u;

@@ -37,13 +37,16 @@ pub struct KernelSet {
     pub motion_norm: &'static str,
     /// The slots the control-node blend loops over (`DISPFLOW_NODES_SLOTS`).
     pub nodes_slots: &'static str,
+    /// How the kernels with a texel twin reach their arrays (`DISPFLOW_ACCESS`).
+    pub access: &'static str,
 }
 
 impl KernelSet {
     /// Each choice with the variable that carries it.
-    fn vars(&self) -> [(&'static str, &'static str); 10] {
+    fn vars(&self) -> [(&'static str, &'static str); 11] {
         use crate::kernels::{
-            binning, loss, mlp_rows, motion, nodes, radix_sort, raster, shape::DeviceShape,
+            binning, loss, mlp_rows, motion, nodes, radix_sort, raster, shape::Access,
+            shape::DeviceShape,
         };
         [
             (mlp_rows::MlpKernels::ENV, self.mlp),
@@ -56,6 +59,7 @@ impl KernelSet {
             (binning::Binning::ENV, self.binning),
             (motion::NormMagShape::ENV, self.motion_norm),
             (nodes::SlotLoop::ENV, self.nodes_slots),
+            (Access::ENV, self.access),
         ]
     }
 
@@ -90,6 +94,7 @@ const ISSUE_60: KernelSet = KernelSet {
     binning: "radix",
     motion_norm: "tree",
     nodes_slots: "max",
+    access: "buffer",
 };
 
 /// The same kernels binning each splat to its opacity-aware box.
@@ -124,8 +129,10 @@ const BANDS: KernelSet = KernelSet {
 /// and the control-node blend over 4 slots at K <= 4 (stop 71; the older sets loop over all 8),
 /// the same with the blend backward giving each tile to the bands or the whole-tile kernel by
 /// the forward's stopping points (stop 72), and today's CPU default: the same choices with the
-/// whole-tile blends, whose walks load their splats in batches (stop 74).
-pub const KERNEL_SETS: [KernelSet; 7] = [
+/// whole-tile blends, whose walks load their splats in batches (stop 74), and today's CPU
+/// default: that set with the flow, the whole-tile blends, the rows MLP and the rows blur
+/// reading and writing their arrays through texel buffers (stop 76).
+pub const KERNEL_SETS: [KernelSet; 8] = [
     KernelSet {
         name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
         mlp: "tiled",
@@ -138,20 +145,31 @@ pub const KERNEL_SETS: [KernelSet; 7] = [
         binning: "radix",
         motion_norm: "tree",
         nodes_slots: "max",
+        access: "buffer",
     },
     ISSUE_60,
     BOXES,
     DEPTH_FIRST,
     BANDS,
     PICKED,
+    BATCHED,
     KernelSet {
-        name: "the same with whole-tile blends, which load their splats in batches (today's \
-               CPU default)",
-        blend_fwd: "tile-regs",
-        blend_bwd: "tile-accum",
-        ..PICKED
+        name: "the same with the flow, whole-tile blends, rows MLP and rows blur reading and \
+               writing through texel buffers (today's CPU default)",
+        access: "texel",
+        ..BATCHED
     },
 ];
+
+/// Stop 74–75's CPU default: [`PICKED`] with whole-tile blends that load their splats in
+/// batches, every array a storage buffer.
+const BATCHED: KernelSet = KernelSet {
+    name: "the same with whole-tile blends, which load their splats in batches (stop 74–75's \
+           CPU default)",
+    blend_fwd: "tile-regs",
+    blend_bwd: "tile-accum",
+    ..PICKED
+};
 
 /// Stop 72–73's CPU default: [`BANDS`] with the blend backward picked per tile.
 const PICKED: KernelSet = KernelSet {
@@ -308,7 +326,7 @@ pub fn make_quarter_transient(tr: &mut Trainer) -> Result<()> {
 /// the splat extent: GPUs bin to the opacity-aware box too).
 pub fn default_set(gpu: &Gpu) -> usize {
     if gpu.info.kind == "CPU" {
-        5
+        7
     } else {
         0
     }
@@ -484,10 +502,11 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
     }
     // Each later CPU set against the issue's and against the set it changes.
     let issue_set = KERNEL_SETS[1].name;
-    let (bands, picked, whole) = (
+    let (bands, picked, whole, texel) = (
         KERNEL_SETS[4].name,
         KERNEL_SETS[5].name,
         KERNEL_SETS[6].name,
+        KERNEL_SETS[7].name,
     );
     for (set, prev, what, prev_what, change) in [
         (
@@ -510,6 +529,13 @@ pub fn report(gpu: &Gpu, rows: &[StepRow], reps: usize) -> Result<Vec<BenchRow>>
             "with whole-tile blends loading their splats in batches",
             "stop 72–73's picked bands",
             "picked bands → batched whole tiles",
+        ),
+        (
+            texel,
+            whole,
+            "with texel-buffer arrays",
+            "stop 74–75's storage buffers",
+            "storage → texel buffers",
         ),
     ] {
         for r in rows.iter().filter(|r| r.kernels == set) {

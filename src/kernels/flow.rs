@@ -36,6 +36,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
+use crate::kernels::shape::{Access, DeviceShape};
 use crate::shaders;
 use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
 
@@ -278,7 +279,13 @@ pub struct TvL1Flow {
 }
 
 impl TvL1Flow {
+    /// The estimator in the device's array-access shape ([`Access`]).
     pub fn new(gpu: &Gpu, cfg: FlowConfig) -> Result<Self> {
+        Self::with_access(gpu, cfg, Access::for_device(&gpu.info))
+    }
+
+    /// The estimator with its warp, iteration and upsampling stages in `access`'s shape.
+    pub fn with_access(gpu: &Gpu, cfg: FlowConfig, access: Access) -> Result<Self> {
         cfg.validate()?;
         use shaders::flow as f;
         Ok(TvL1Flow {
@@ -286,9 +293,9 @@ impl TvL1Flow {
             grey: gpu.pipeline(&f::GREY)?,
             downsample: gpu.pipeline(&f::DOWNSAMPLE)?,
             gradient: gpu.pipeline(&f::GRADIENT)?,
-            warp: gpu.pipeline(&f::WARP)?,
-            tvl1: gpu.pipeline(&f::TVL1)?,
-            upsample: gpu.pipeline(&f::UPSAMPLE)?,
+            warp: gpu.pipeline(access.pick(&f::WARP, &f::WARP_TEXEL))?,
+            tvl1: gpu.pipeline(access.pick(&f::TVL1, &f::TVL1_TEXEL))?,
+            upsample: gpu.pipeline(access.pick(&f::UPSAMPLE, &f::UPSAMPLE_TEXEL))?,
             prefilter: gpu.pipeline(&f::PREFILTER)?,
         })
     }

@@ -10,7 +10,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-pub use super::shape::DeviceShape;
+pub use super::shape::{Access, DeviceShape};
 use crate::error::Result;
 use crate::shaders;
 use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
@@ -144,10 +144,19 @@ impl PhotometricLoss {
 
     /// The loss with the blur of shape `blur` (tests run both).
     pub fn with_blur(gpu: &Gpu, blur: BlurShape) -> Result<Self> {
+        Self::with_shapes(gpu, blur, Access::for_device(&gpu.info))
+    }
+
+    /// The loss with the blur of shape `blur`, the rows blur reaching its planes through
+    /// `access`.
+    pub fn with_shapes(gpu: &Gpu, blur: BlurShape, access: Access) -> Result<Self> {
         use shaders::loss as l;
         let (h, v) = match blur {
             BlurShape::Pixel => (&l::BLUR_H, &l::BLUR_V),
-            BlurShape::Rows => (&l::BLUR_H_ROWS, &l::BLUR_V_ROWS),
+            BlurShape::Rows => (
+                access.pick(&l::BLUR_H_ROWS, &l::BLUR_H_ROWS_TEXEL),
+                access.pick(&l::BLUR_V_ROWS, &l::BLUR_V_ROWS_TEXEL),
+            ),
         };
         Ok(PhotometricLoss {
             products: gpu.pipeline(&l::SSIM_PRODUCTS)?,

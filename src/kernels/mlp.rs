@@ -19,7 +19,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::mlp_rows::{DeviceShape, Gemv, MlpKernels, RowsPath};
+use super::mlp_rows::{Access, DeviceShape, Gemv, MlpKernels, RowsPath};
 use crate::error::{Error, Result};
 use crate::model::deform::{LinearSpec, MlpConfig, MlpLayout, OUT_DIMS};
 use crate::shaders;
@@ -258,9 +258,19 @@ impl Mlp {
     }
 
     pub fn with_kernels(gpu: &Gpu, cfg: &MlpConfig, kernels: MlpKernels) -> Result<Self> {
+        Self::with_shapes(gpu, cfg, kernels, Access::for_device(&gpu.info))
+    }
+
+    /// [`Mlp::with_kernels`] with the register path reaching its rows through `access`.
+    pub fn with_shapes(
+        gpu: &Gpu,
+        cfg: &MlpConfig,
+        kernels: MlpKernels,
+        access: Access,
+    ) -> Result<Self> {
         Ok(Mlp {
             rows: match kernels {
-                MlpKernels::Rows => Some(RowsPath::new(gpu)?),
+                MlpKernels::Rows => Some(RowsPath::with_access(gpu, access)?),
                 MlpKernels::Tiled => None,
             },
             layout: MlpLayout::new(cfg)?,

@@ -11,7 +11,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-pub use super::shape::DeviceShape;
+pub use super::shape::{Access, DeviceShape};
 use crate::error::Result;
 use crate::shaders;
 use crate::vk::{BufSlice, ComputePipeline, Gpu, Recorder};
@@ -134,9 +134,17 @@ pub struct RowsPath {
 
 impl RowsPath {
     pub fn new(gpu: &Gpu) -> Result<Self> {
+        Self::with_access(gpu, Access::for_device(&gpu.info))
+    }
+
+    /// The rows kernels reaching their per-row arrays through `access`.
+    pub fn with_access(gpu: &Gpu, access: Access) -> Result<Self> {
+        use shaders::mlp as m;
         Ok(RowsPath {
-            rows: gpu.pipeline(&shaders::mlp::LINEAR_ROWS)?,
-            weight: gpu.pipeline(&shaders::mlp::LINEAR_BWD_WEIGHT_ROWS)?,
+            rows: gpu.pipeline(access.pick(&m::LINEAR_ROWS, &m::LINEAR_ROWS_TEXEL))?,
+            weight: gpu.pipeline(
+                access.pick(&m::LINEAR_BWD_WEIGHT_ROWS, &m::LINEAR_BWD_WEIGHT_ROWS_TEXEL),
+            )?,
             transpose: gpu.pipeline(&shaders::mlp::TRANSPOSE_W)?,
             range: (gpu.info.max_uniform_buffer_range as u64).min(UBO_BLOCK),
             align: gpu.info.min_uniform_buffer_offset_alignment.max(4),

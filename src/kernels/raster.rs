@@ -22,7 +22,7 @@ pub use super::binning::Binning;
 use super::binning::{BinParams, DepthFirst, DepthFirstBuffers};
 use super::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use super::scan::{Count, PrefixSum, ScanScratch};
-pub use super::shape::DeviceShape;
+pub use super::shape::{Access, DeviceShape};
 use crate::error::{Error, Result};
 use crate::shaders;
 use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
@@ -599,17 +599,24 @@ impl DeviceShape for SplatExtent {
     }
 }
 
+/// The whole-tile row of the blend pipelines (`dispatches`' kernel 1) and its texel twin's.
+const WHOLE_TILE: usize = 1;
+const WHOLE_TILE_TEXEL: usize = 3;
+
 pub struct Rasterizer {
     project: ComputePipeline,
     bin_total: ComputePipeline,
     bin_emit: ComputePipeline,
     bin_ranges: ComputePipeline,
-    /// Per variant (its discriminant), per feature count.
-    blend_fwd: [[ComputePipeline; 4]; 3],
+    /// Per variant (its discriminant), per feature count; row 3 is the whole tile (row 1)
+    /// reading and writing through texel buffers ([`WHOLE_TILE_TEXEL`]).
+    blend_fwd: [[ComputePipeline; 4]; 4],
     blend_fwd_variant: BlendFwdVariant,
-    /// Per kernel (`BlendBwdVariant::dispatches`), per feature count.
-    blend_bwd: [[ComputePipeline; 4]; 3],
+    /// Per kernel (`BlendBwdVariant::dispatches`), per feature count; row 3 as in `blend_fwd`.
+    blend_bwd: [[ComputePipeline; 4]; 4],
     blend_bwd_variant: BlendBwdVariant,
+    /// How the whole-tile blends reach their arrays.
+    access: Access,
     blend_bwd_pick: ComputePipeline,
     pick_costs: PickCosts,
     project_bwd: ComputePipeline,
@@ -670,6 +677,12 @@ impl Rasterizer {
                     gpu.pipeline(&r::BLEND_FWD_BAND_F3)?,
                     gpu.pipeline(&r::BLEND_FWD_BAND_F6)?,
                 ],
+                [
+                    gpu.pipeline(&r::BLEND_FWD_TILE_TEXEL_F0)?,
+                    gpu.pipeline(&r::BLEND_FWD_TILE_TEXEL_F2)?,
+                    gpu.pipeline(&r::BLEND_FWD_TILE_TEXEL_F3)?,
+                    gpu.pipeline(&r::BLEND_FWD_TILE_TEXEL_F6)?,
+                ],
             ],
             blend_fwd_variant: BlendFwdVariant::for_device(&gpu.info),
             blend_bwd: [
@@ -691,7 +704,14 @@ impl Rasterizer {
                     gpu.pipeline(&r::BLEND_BWD_BAND_F3)?,
                     gpu.pipeline(&r::BLEND_BWD_BAND_F6)?,
                 ],
+                [
+                    gpu.pipeline(&r::BLEND_BWD_TILE_TEXEL_F0)?,
+                    gpu.pipeline(&r::BLEND_BWD_TILE_TEXEL_F2)?,
+                    gpu.pipeline(&r::BLEND_BWD_TILE_TEXEL_F3)?,
+                    gpu.pipeline(&r::BLEND_BWD_TILE_TEXEL_F6)?,
+                ],
             ],
+            access: Access::for_device(&gpu.info),
             blend_bwd_variant: BlendBwdVariant::for_device(&gpu.info),
             blend_bwd_pick: gpu.pipeline(&r::BLEND_BWD_PICK)?,
             pick_costs: PICK_COSTS,
@@ -713,6 +733,26 @@ impl Rasterizer {
     /// Chooses the blend-forward variant (benches and tests compare them on one device).
     pub fn set_blend_fwd_variant(&mut self, v: BlendFwdVariant) {
         self.blend_fwd_variant = v;
+    }
+
+    /// How the whole-tile blends reach their arrays (storage or texel buffers).
+    pub fn access(&self) -> Access {
+        self.access
+    }
+
+    /// Chooses the whole-tile blends' array access (benches and tests compare them).
+    pub fn set_access(&mut self, a: Access) {
+        self.access = a;
+    }
+
+    /// The pipeline row of kernel row `k` of a variant's dispatches: the whole tile's texel
+    /// twin when the access is texel.
+    fn row(&self, k: usize) -> usize {
+        if k == WHOLE_TILE && self.access == Access::Texel {
+            WHOLE_TILE_TEXEL
+        } else {
+            k
+        }
     }
 
     /// The blend-backward variant `backward` records.
@@ -994,7 +1034,7 @@ impl Rasterizer {
         binds.push(b.meta.slice(256, 4));
         for &(k, pick) in self.blend_fwd_variant.dispatches() {
             rec.dispatch(
-                &self.blend_fwd[k][variant(g.feature_dims()).unwrap()],
+                &self.blend_fwd[self.row(k)][variant(g.feature_dims()).unwrap()],
                 &BlendParams { pick, ..bp },
                 &binds,
                 [tx.max(1), ty.max(1), 1],
@@ -1178,7 +1218,7 @@ impl Rasterizer {
         }
         for &(k, pick) in v.dispatches() {
             rec.dispatch(
-                &self.blend_bwd[k][variant(g.feature_dims()).unwrap()],
+                &self.blend_bwd[self.row(k)][variant(g.feature_dims()).unwrap()],
                 &BlendParams { pick, ..bp },
                 &binds,
                 [tx.max(1), ty.max(1), 1],

@@ -57,6 +57,43 @@ fn choose<S: DeviceShape>(var: Option<&str>, cpu: bool) -> Result<S, (S, String)
     }
 }
 
+/// How kernels with a texel variant reach their per-element arrays (`DISPFLOW_ACCESS`):
+/// storage buffers (GPUs: coalesced loads) or storage texel buffers (CPU devices: llvmpipe 22.3
+/// runs a storage-buffer access at per-lane addresses as a loop over the lanes, an image load
+/// as one gather; glsl/include/access.glsl). Both read and write the same floats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Access {
+    Buffer,
+    Texel,
+}
+
+impl DeviceShape for Access {
+    const ENV: &'static str = "DISPFLOW_ACCESS";
+    const ALL: &'static [Self] = &[Access::Buffer, Access::Texel];
+    const CPU: Self = Access::Texel;
+    const GPU: Self = Access::Buffer;
+    fn name(self) -> &'static str {
+        match self {
+            Access::Buffer => "buffer",
+            Access::Texel => "texel",
+        }
+    }
+}
+
+impl Access {
+    /// `buffer`'s shader in this shape, `texel` its texel-buffer twin.
+    pub fn pick(
+        self,
+        buffer: &'static crate::shaders::ShaderInfo,
+        texel: &'static crate::shaders::ShaderInfo,
+    ) -> &'static crate::shaders::ShaderInfo {
+        match self {
+            Access::Buffer => buffer,
+            Access::Texel => texel,
+        }
+    }
+}
+
 /// What `info`'s device runs in every shaped family: (family, shape, the variable that
 /// overrides it), for `dispflow-vk devices`.
 pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'static str)> {
@@ -79,6 +116,7 @@ pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'s
         row::<BlurShape>("loss blur", info),
         row::<NormMagShape>("motion magnitude", info),
         row::<radix_sort::SortShape>("radix sort", info),
+        row::<Access>("array access (flow)", info),
     ]
 }
 

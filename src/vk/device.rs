@@ -89,6 +89,9 @@ pub struct DeviceInfo {
     pub max_workgroup_count: [u32; 3],
     pub max_storage_buffer_range: u32,
     pub min_storage_buffer_offset_alignment: u64,
+    /// Texel-buffer limits (the CPU shape's `imageBuffer` arrays, glsl/include/access.glsl).
+    pub max_texel_buffer_elements: u32,
+    pub min_texel_buffer_offset_alignment: u64,
     pub max_uniform_buffer_range: u32, // lavapipe: 64 KiB (the register MLP's weight windows)
     pub min_uniform_buffer_offset_alignment: u64,
     pub max_push_constants: u32,
@@ -585,6 +588,8 @@ impl Gpu {
             max_workgroup_count: p.limits.max_compute_work_group_count,
             max_storage_buffer_range: p.limits.max_storage_buffer_range,
             min_storage_buffer_offset_alignment: p.limits.min_storage_buffer_offset_alignment,
+            max_texel_buffer_elements: p.limits.max_texel_buffer_elements,
+            min_texel_buffer_offset_alignment: p.limits.min_texel_buffer_offset_alignment,
             max_uniform_buffer_range: p.limits.max_uniform_buffer_range,
             min_uniform_buffer_offset_alignment: p.limits.min_uniform_buffer_offset_alignment,
             max_push_constants: p.limits.max_push_constants_size,

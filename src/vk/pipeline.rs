@@ -7,7 +7,7 @@ use ash::vk;
 
 use super::device::{Gpu, Shared};
 use crate::error::Result;
-use crate::shaders::ShaderInfo;
+use crate::shaders::{BindingInfo, ShaderInfo};
 
 /// A compute pipeline whose descriptor layout (push descriptors, set 0), push-constant range and
 /// workgroup size come from the SPIR-V reflection in the shader table. Shared: every wrapper
@@ -84,11 +84,7 @@ impl Gpu {
             .map(|b| {
                 vk::DescriptorSetLayoutBinding::default()
                     .binding(b.binding)
-                    .descriptor_type(if b.uniform {
-                        vk::DescriptorType::UNIFORM_BUFFER
-                    } else {
-                        vk::DescriptorType::STORAGE_BUFFER
-                    })
+                    .descriptor_type(descriptor_type(b))
                     .descriptor_count(1)
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
             })
@@ -131,5 +127,16 @@ impl Gpu {
             layout,
             set_layout,
         })
+    }
+}
+
+/// The descriptor type of a reflected binding.
+pub(crate) fn descriptor_type(b: &BindingInfo) -> vk::DescriptorType {
+    if b.texel_format != 0 {
+        vk::DescriptorType::STORAGE_TEXEL_BUFFER
+    } else if b.uniform {
+        vk::DescriptorType::UNIFORM_BUFFER
+    } else {
+        vk::DescriptorType::STORAGE_BUFFER
     }
 }

@@ -11,7 +11,7 @@ use bytemuck::Pod;
 
 use super::buffer::BufSlice;
 use super::device::Gpu;
-use super::pipeline::ComputePipeline;
+use super::pipeline::{descriptor_type, ComputePipeline};
 use crate::error::Result;
 
 #[derive(Clone, Copy)]
@@ -74,6 +74,8 @@ pub struct Recorder<'g> {
     barriers: u32,
     dispatches: u32,
     tracking: bool,
+    /// Texel-buffer views made for this command buffer's dispatches.
+    views: Vec<vk::BufferView>,
 }
 
 impl<'g> Recorder<'g> {
@@ -110,6 +112,7 @@ impl<'g> Recorder<'g> {
             barriers: 0,
             dispatches: 0,
             tracking: true,
+            views: Vec::new(),
         };
         rec.cmd = unsafe {
             d.allocate_command_buffers(
@@ -251,6 +254,39 @@ impl<'g> Recorder<'g> {
         }
     }
 
+    /// A view of `s` as texels of `format`, over the whole texels the slice holds.
+    fn texel_view(&self, s: &BufSlice<'_>, format: vk::Format) -> vk::BufferView {
+        let texel = match format {
+            vk::Format::R32G32B32A32_SFLOAT | vk::Format::R32G32B32A32_UINT => 16,
+            vk::Format::R32G32_SFLOAT => 8,
+            _ => 4,
+        };
+        let info = &self.gpu.info;
+        let texels = s.size / texel;
+        assert!(
+            s.offset % info.min_texel_buffer_offset_alignment.max(1) == 0
+                && texels >= 1
+                && texels <= info.max_texel_buffer_elements as u64,
+            "texel-buffer binding {s:?} as {format:?}: the offset must be a multiple of {} \
+             bytes and the slice hold 1 to {} texels of {texel} bytes",
+            info.min_texel_buffer_offset_alignment,
+            info.max_texel_buffer_elements
+        );
+        unsafe {
+            self.gpu
+                .device()
+                .create_buffer_view(
+                    &vk::BufferViewCreateInfo::default()
+                        .buffer(s.raw())
+                        .format(format)
+                        .offset(s.offset)
+                        .range(texels * texel),
+                    None,
+                )
+                .expect("vkCreateBufferView")
+        }
+    }
+
     fn bind<P: Pod>(
         &mut self,
         p: &ComputePipeline,
@@ -284,19 +320,35 @@ impl<'g> Recorder<'g> {
                     .range(b.size)
             })
             .collect();
+        // Texel buffers read through a view; the views live until the recorder is dropped
+        // (after `finish` waited for the command buffer).
+        let views: Vec<vk::BufferView> = info
+            .bindings
+            .iter()
+            .zip(bindings)
+            .map(|(b, s)| {
+                if b.texel_format == 0 {
+                    return vk::BufferView::null();
+                }
+                let view = self.texel_view(s, vk::Format::from_raw(b.texel_format));
+                self.views.push(view);
+                view
+            })
+            .collect();
         let writes: Vec<vk::WriteDescriptorSet> = info
             .bindings
             .iter()
             .zip(&infos)
-            .map(|(b, bi)| {
-                vk::WriteDescriptorSet::default()
+            .zip(&views)
+            .map(|((b, bi), view)| {
+                let w = vk::WriteDescriptorSet::default()
                     .dst_binding(b.binding)
-                    .descriptor_type(if b.uniform {
-                        vk::DescriptorType::UNIFORM_BUFFER
-                    } else {
-                        vk::DescriptorType::STORAGE_BUFFER
-                    })
-                    .buffer_info(std::slice::from_ref(bi))
+                    .descriptor_type(descriptor_type(b));
+                if b.texel_format != 0 {
+                    w.texel_buffer_view(std::slice::from_ref(view))
+                } else {
+                    w.buffer_info(std::slice::from_ref(bi))
+                }
             })
             .collect();
         let mut reads = Vec::new();
@@ -519,6 +571,9 @@ impl Drop for Recorder<'_> {
                 d.destroy_query_pool(qp, None);
             }
             d.destroy_command_pool(self.pool, None);
+            for v in self.views.drain(..) {
+                d.destroy_buffer_view(v, None);
+            }
         }
     }
 }

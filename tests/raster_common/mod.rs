@@ -2,8 +2,8 @@
 #![allow(dead_code)]
 
 use dispflow_vk::kernels::raster::{
-    join_sh, split_sh, BlendBwdVariant, BlendFwdVariant, Camera, OutputGrads, RasterBuffers,
-    RasterSize, Rasterizer, RenderOpts, SplatInputs,
+    join_sh, split_sh, Access, BlendBwdVariant, BlendFwdVariant, Camera, OutputGrads,
+    RasterBuffers, RasterSize, Rasterizer, RenderOpts, SplatInputs,
 };
 use dispflow_vk::testing::{self, Noise, TestGpu};
 use dispflow_vk::vk::{Buffer, Recorder};
@@ -237,6 +237,36 @@ pub fn render_each(
     out
 }
 
+/// [`render_each`], then the whole tile once more in the other array access (texel or
+/// storage buffers: [`other_access`]), last; leaves `rast` on its defaults. The twin tests
+/// use it; the extremes keep the device's access (the whole step trains with it).
+pub fn render_each_access(
+    gpu: &TestGpu,
+    rast: &mut Rasterizer,
+    cam: &Camera,
+    up: &Uploaded,
+    opts: &RenderOpts,
+) -> Vec<(BlendFwdVariant, RasterBuffers, Rendered)> {
+    let mut out = render_each(gpu, rast, cam, up, opts);
+    let default = rast.blend_fwd_variant();
+    let access = rast.access();
+    rast.set_access(other_access(access));
+    rast.set_blend_fwd_variant(BlendFwdVariant::TileRegs);
+    let (b, r) = render(gpu, rast, cam, up, opts);
+    out.push((BlendFwdVariant::TileRegs, b, r));
+    rast.set_access(access);
+    rast.set_blend_fwd_variant(default);
+    out
+}
+
+/// The array access a device does not pick (the whole-tile blends have both).
+pub fn other_access(a: Access) -> Access {
+    match a {
+        Access::Texel => Access::Buffer,
+        Access::Buffer => Access::Texel,
+    }
+}
+
 pub struct Grads {
     pub grad2d: Vec<f32>,
     pub d_features: Vec<f32>,
@@ -329,6 +359,30 @@ pub fn backward_each(
             (v, backward(gpu, rast, b, cam, up, opts, u))
         })
         .collect();
+    rast.set_blend_bwd_variant(default);
+    out
+}
+
+/// [`backward_each`], then the whole tile once more in the other array access, last.
+pub fn backward_each_access(
+    gpu: &TestGpu,
+    rast: &mut Rasterizer,
+    b: &RasterBuffers,
+    cam: &Camera,
+    up: &Uploaded,
+    opts: &RenderOpts,
+    u: &Upstream,
+) -> Vec<(BlendBwdVariant, Grads)> {
+    let mut out = backward_each(gpu, rast, b, cam, up, opts, u);
+    let default = rast.blend_bwd_variant();
+    let access = rast.access();
+    rast.set_access(other_access(access));
+    rast.set_blend_bwd_variant(BlendBwdVariant::TileAccum);
+    out.push((
+        BlendBwdVariant::TileAccum,
+        backward(gpu, rast, b, cam, up, opts, u),
+    ));
+    rast.set_access(access);
     rast.set_blend_bwd_variant(default);
     out
 }

@@ -1,0 +1,5 @@
+#version 460
+// Weight gradient for CPU devices, texel arrays: its arrays are texel buffers (glsl/include/access.glsl).
+#extension GL_GOOGLE_include_directive : require
+#define TEXEL_ACCESS
+#include "linear_bwd_weight_rows.glsl"

@@ -1,0 +1,7 @@
+#version 460
+// Blend forward, whole tile, 0 extra feature channels: blend_fwd_tile_f0.comp with its
+// arrays as texel buffers (glsl/include/access.glsl; the CPU shape of kernels::shape::Access).
+#define FEAT 0
+#define PX 32
+#define TEXEL_ACCESS
+#include "blend_fwd_tile.glsl"
