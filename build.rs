@@ -142,6 +142,29 @@ fn main() {
                 .unwrap();
             }
             writeln!(code, "        ],").unwrap();
+            // A texel twin (`*_texel*`) names its storage-buffer shape, which a dispatch runs
+            // instead when a binding cannot be a texel view (kernels::shape::Access).
+            match stem.contains("_texel") {
+                true => {
+                    let twin = stem.replacen("_texel", "", 1);
+                    let (tf, tn) = twin.rsplit_once('/').unwrap_or(("root", &twin));
+                    let known = table
+                        .get(&tf.replace('/', "_"))
+                        .is_some_and(|v| v.iter().any(|e| e.1 == twin));
+                    assert!(
+                        known,
+                        "{stem}: its storage-buffer twin {twin}.comp is missing"
+                    );
+                    writeln!(
+                        code,
+                        "        buffer_twin: Some(&super::{}::{}),",
+                        tf.replace('/', "_"),
+                        tn.to_uppercase()
+                    )
+                    .unwrap();
+                }
+                false => writeln!(code, "        buffer_twin: None,").unwrap(),
+            }
             writeln!(code, "        push_constant_size: {},", r.push_size).unwrap();
             writeln!(code, "        push_constant_struct: {:?},", r.push_struct).unwrap();
             writeln!(

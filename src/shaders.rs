@@ -27,6 +27,9 @@ pub struct ShaderInfo {
     pub spirv: &'static [u8],
     pub workgroup_size: [u32; 3],
     pub bindings: &'static [BindingInfo],
+    /// A texel-buffer stage's storage-buffer twin (same bindings in the same order, same
+    /// results), which a dispatch runs when a binding cannot be a texel view.
+    pub buffer_twin: Option<&'static ShaderInfo>,
     /// Bytes of push constants the stage reads (0 if none).
     pub push_constant_size: u32,
     /// GLSL name of the push-constant struct (mirrored by a Rust struct of the same name).

@@ -8,6 +8,7 @@
 //! (the update is ≲ lr; its relative error follows m's).
 
 use dispflow_vk::kernels::adam::{Adam, AdamBuffers, AdamGroup};
+use dispflow_vk::kernels::shape::Access;
 use dispflow_vk::model::optim::{AdamHyper, ExpLr};
 use dispflow_vk::reference::adam::adam_step;
 use dispflow_vk::testing::{self, Noise};
@@ -54,8 +55,15 @@ fn check(what: &str, got: &[f32], want: &[f32], scale: &[f32], rel: f32, abs: f3
 
 #[test]
 fn adam_matches_scalar_reference_over_steps_with_groups_and_mask() {
+    // Both array accesses: storage buffers (GPUs) and texel buffers (CPU devices).
+    for access in [Access::Buffer, Access::Texel] {
+        matches_reference(access);
+    }
+}
+
+fn matches_reference(access: Access) {
     let gpu = testing::gpu();
-    let adam = Adam::new(&gpu).unwrap();
+    let adam = Adam::with_access(&gpu, access).unwrap();
     let n = 10_000usize;
     let (split, row_len) = (3_001usize, 3usize); // group 1: rows of 3 floats from `split`
     let rows = (n - split).div_ceil(row_len);
@@ -125,9 +133,10 @@ fn adam_matches_scalar_reference_over_steps_with_groups_and_mask() {
         }
         let [gp, gm, gv] = b.read(&gpu, n);
         let lr_max = lr[0].max(lr[1]);
-        check(&format!("step {step} p"), &gp, &p, &p, 4e-7, 1e-5 * lr_max);
-        check(&format!("step {step} m"), &gm, &m, &m_abs, 1e-6, 1e-30);
-        check(&format!("step {step} v"), &gv, &v, &v, 1e-6, 1e-30);
+        let at = |what: &str| format!("{access:?} step {step} {what}");
+        check(&at("p"), &gp, &p, &p, 4e-7, 1e-5 * lr_max);
+        check(&at("m"), &gm, &m, &m_abs, 1e-6, 1e-30);
+        check(&at("v"), &gv, &v, &v, 1e-6, 1e-30);
     }
     // Masked rows are untouched, bit for bit; visible rows moved; zero gradients never move p.
     let [gp, gm, gv] = b.read(&gpu, n);
@@ -260,3 +269,55 @@ fn guarded_step_is_a_no_op_when_any_overflow_flag_is_set() {
 }
 
 dispflow_vk::subgroup_reruns!();
+
+/// The texel stage on slices that start inside their buffers (the views' offsets) gives the
+/// buffer shape's floats bit for bit, and runs itself, not its storage-buffer twin (which a
+/// dispatch takes only for bindings that cannot be texel views: recorder.rs's unit test).
+#[test]
+fn texel_views_at_an_offset_match_the_buffer_shape() {
+    let gpu = testing::gpu();
+    let n = 1001usize;
+    let mut noise = Noise::new(5);
+    let p0: Vec<f32> = (0..n + 4).map(|_| noise.uniform(-1.0, 1.0)).collect();
+    let g: Vec<f32> = (0..n + 4).map(|_| noise.uniform(-1.0, 1.0)).collect();
+    let groups = [AdamGroup {
+        first: 0,
+        count: n as u32,
+        lr: 0.01,
+        mask: None,
+    }];
+    let mut results = Vec::new();
+    for access in [Access::Buffer, Access::Texel] {
+        let adam = Adam::with_access(&gpu, access).unwrap();
+        let b = Bufs::new(&gpu, &p0);
+        gpu.upload(b.g.all(), &g).unwrap();
+        let (offset, bytes) = (16u64, n as u64 * 4);
+        let ab = AdamBuffers {
+            params: b.p.slice(offset, bytes),
+            grads: b.g.slice(offset, bytes),
+            m: b.m.slice(offset, bytes),
+            v: b.v.slice(offset, bytes),
+        };
+        let mut rec = Recorder::new(&gpu).unwrap();
+        adam.record(&mut rec, ab, &groups, &AdamHyper::default(), 1);
+        assert_eq!(rec.twin_dispatch_count(), 0, "{access:?}");
+        rec.finish().unwrap();
+        let p: Vec<f32> = gpu.read(b.p.all()).unwrap();
+        assert_eq!(
+            p[..4],
+            p0[..4],
+            "{access:?}: a float before the slice moved"
+        );
+        assert_eq!(
+            p[4 + n..],
+            p0[4 + n..],
+            "{access:?}: a float after the slice moved"
+        );
+        assert!(
+            p[4..4 + n].iter().zip(&p0[4..]).all(|(a, b)| a != b),
+            "{access:?}: a float of the slice did not move"
+        );
+        results.push(p);
+    }
+    assert_eq!(results[0], results[1], "texel and buffer shapes differ");
+}

@@ -49,9 +49,10 @@ fn twin_gradient_matches_finite_differences() {
     eprintln!("worst relative FD error {worst:.2e}");
 }
 
-/// Every blur shape, the rows blur through storage and through texel buffers.
-const SHAPES: [(BlurShape, Access); 3] = [
+/// Every blur shape, each with the other stages through storage and through texel buffers.
+const SHAPES: [(BlurShape, Access); 4] = [
     (BlurShape::Pixel, Access::Buffer),
+    (BlurShape::Pixel, Access::Texel),
     (BlurShape::Rows, Access::Buffer),
     (BlurShape::Rows, Access::Texel),
 ];

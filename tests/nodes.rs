@@ -5,7 +5,7 @@
 //! checked against central finite differences in `reference::nodes`.
 
 use dispflow_vk::kernels::nodes::{
-    key_bits, BlendInputs, GatherShape, NodeKernels, SlotLoop, CONTRIB_STORED, NO_NODE,
+    key_bits, Access, BlendInputs, GatherShape, NodeKernels, SlotLoop, CONTRIB_STORED, NO_NODE,
 };
 use dispflow_vk::kernels::radix_sort::passes;
 use dispflow_vk::kernels::shape::DeviceShape;
@@ -99,9 +99,9 @@ impl Gpu3 {
         Gpu3 { gpu, k }
     }
 
-    fn with_shapes(shape: GatherShape, slots: SlotLoop) -> Self {
+    fn with_shapes(shape: GatherShape, slots: SlotLoop, access: Access) -> Self {
         let gpu = testing::gpu();
-        let k = NodeKernels::with_shapes(&gpu, shape, slots).unwrap();
+        let k = NodeKernels::with_access(&gpu, shape, slots, access).unwrap();
         Gpu3 { gpu, k }
     }
 
@@ -332,14 +332,24 @@ fn blend_checked_on(g: &Gpu3, p: &Problem, k: u32, split: bool, tol: f64) {
 
 #[test]
 fn blend_forward_backward_and_gather_match_the_twin() {
-    // Both gather shapes (the tree GPUs run, the serial loop CPU devices run) and both slot
-    // loops (all 8 slots, as GPUs; 4 slots at K <= 4, as CPU devices) against the twin.
+    // Both gather shapes (the tree GPUs run, the serial loop CPU devices run), both slot
+    // loops (all 8 slots, as GPUs; 4 slots at K <= 4, as CPU devices) and, for the GPU's and
+    // the CPU's pair, both array accesses (storage and texel buffers) against the twin.
     for shape in [GatherShape::Tree, GatherShape::Serial] {
         for slots in [SlotLoop::Max, SlotLoop::Fit] {
-            let g = Gpu3::with_shapes(shape, slots);
-            blend_checked_on(&g, &problem(4, 200, 23), 4, false, 2e-4);
-            blend_checked_on(&g, &problem(5, 120, 9), 1, false, 2e-4);
-            blend_checked_on(&g, &problem(6, 150, 17), 8, true, 2e-4);
+            let mut accesses = vec![Access::Buffer];
+            if (shape, slots) == (GatherShape::Serial, SlotLoop::Fit) {
+                accesses.push(Access::Texel);
+            }
+            if (shape, slots) == (GatherShape::Tree, SlotLoop::Max) {
+                accesses.push(Access::Texel);
+            }
+            for access in accesses {
+                let g = Gpu3::with_shapes(shape, slots, access);
+                blend_checked_on(&g, &problem(4, 200, 23), 4, false, 2e-4);
+                blend_checked_on(&g, &problem(5, 120, 9), 1, false, 2e-4);
+                blend_checked_on(&g, &problem(6, 150, 17), 8, true, 2e-4);
+            }
         }
     }
 }

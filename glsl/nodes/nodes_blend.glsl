@@ -7,16 +7,17 @@
 #include "params.glsl"
 #include "raster.glsl"
 #include "nodes.glsl"
+#include "access.glsl"
 
 layout(local_size_x = 128) in;
 
 layout(push_constant) uniform Push { NodesParams pc; };
-layout(std430, binding = 0) readonly buffer Means { float means[]; };     // [N,3] canonical
-layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };      // [N] canonical
-layout(std430, binding = 2) readonly buffer Nodes { float nodes[]; };     // [4M]
-layout(std430, binding = 3) readonly buffer NodeOut { vec2 node_out[]; }; // [M,10] as [M,5]
-layout(std430, binding = 4) readonly buffer Knn { uint knn[]; };          // [N,K]
-layout(std430, binding = 5) readonly buffer Idx { uint idx[]; };          // [rows] (flags 1)
+ARR_RO(0, float, r32f, Means, means) // [N,3] canonical
+ARR_RO(1, vec4, rgba32f, Quats, quats) // [N] canonical
+ARR_RO(2, float, r32f, Nodes, nodes) // [4M]
+ARR_RO(3, vec2, rg32f, NodeOut, node_out) // [M,10] as [M,5]
+ARR_RO_U(4, uint, r32ui, Knn, knn) // [N,K]
+ARR_RO_U(5, uint, r32ui, Idx, idx) // [rows] (flags 1)
 
 // This invocation's row r and its Gaussian i (the dynamic Gaussian idx[r] with flags 1);
 // false past the last row.
@@ -24,22 +25,22 @@ bool this_row(out uint r, out uint i) {
     r = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     i = r;
     if (r >= pc.n) return false;
-    if ((pc.flags & 1u) != 0u) i = idx[r];
+    if ((pc.flags & 1u) != 0u) i = LDU1(idx, r);
     return true;
 }
 
 vec3 node_t(uint j) {
-    vec2 a = node_out[5 * j], b = node_out[5 * j + 1];
+    vec2 a = LD2(node_out, 5 * j), b = LD2(node_out, 5 * j + 1);
     return vec3(a, b.x);
 }
 
 vec4 node_dq(uint j) {
-    vec2 a = node_out[5 * j + 1], b = node_out[5 * j + 2], c = node_out[5 * j + 3];
+    vec2 a = LD2(node_out, 5 * j + 1), b = LD2(node_out, 5 * j + 2), c = LD2(node_out, 5 * j + 3);
     return vec4(a.y, b, c.x);
 }
 
 vec3 node_ds(uint j) {
-    vec2 a = node_out[5 * j + 3], b = node_out[5 * j + 4];
+    vec2 a = LD2(node_out, 5 * j + 3), b = LD2(node_out, 5 * j + 4);
     return vec3(a.y, b);
 }
 
@@ -68,15 +69,15 @@ Blend blend_of(uint i, vec3 mu) {
     // in scratch memory, where each access is a loop over the lanes; unrolled, the slots live
     // in registers.
     for (uint s = 0; s < NODES_KLOOP; ++s) {
-        uint j = s < pc.k ? knn[i * pc.k + s] : NO_NODE;
+        uint j = s < pc.k ? LDU1(knn, i * pc.k + s) : NO_NODE;
         // The valid slots are a prefix: the first NO_NODE ends them.
         bool on = s == b.count && j < pc.m;
         j = on ? j : 0u;
         b.node[s] = j;
-        float rho = nodes[3 * pc.m + j];
+        float rho = LD1(nodes, 3 * pc.m + j);
         b.clamped[s] = !(rho >= RHO_MIN && rho <= RHO_MAX);
         b.inv[s] = exp(-2.0 * clamp(rho, RHO_MIN, RHO_MAX));
-        b.v[s] = mu - vec3(nodes[3 * j], nodes[3 * j + 1], nodes[3 * j + 2]);
+        b.v[s] = mu - vec3(LD1(nodes, 3 * j), LD1(nodes, 3 * j + 1), LD1(nodes, 3 * j + 2));
         a[s] = -0.5 * dot(b.v[s], b.v[s]) * b.inv[s];
         if (on) amax = max(amax, a[s]);
         vec4 r = node_dq(j);

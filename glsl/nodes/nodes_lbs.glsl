@@ -6,12 +6,12 @@
 // dynamic Gaussians idx[r] (split model), written compactly.
 // nodes_blend.glsl brings the includes, the push constants and bindings 0-5.
 #include "nodes_blend.glsl"
-layout(std430, binding = 6) writeonly buffer Out { vec2 d[]; };           // [rows,10] as [rows,5]
+ARR_WO(6, vec2, rg32f, Out, d) // [rows,10] as [rows,5]
 
 void main() {
     uint r, i;
     if (!this_row(r, i)) return;
-    vec3 mu = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+    vec3 mu = vec3(LD1(means, 3 * i), LD1(means, 3 * i + 1), LD1(means, 3 * i + 2));
     Blend b = blend_of(i, mu);
     vec3 dx = vec3(0.0), ds = vec3(0.0);
     vec4 dr = vec4(0.0);
@@ -23,13 +23,13 @@ void main() {
             ds += b.w[s] * node_ds(j);
         }
         float ql, qbl;
-        vec4 qn = quat_normalize(quats[i], ql);
+        vec4 qn = quat_normalize(LD4(quats, i), ql);
         vec4 qb = quat_normalize(b.Q, qbl);
         dr = qmul(qb, qn) - qn;
     }
-    d[5 * r] = dx.xy;
-    d[5 * r + 1] = vec2(dx.z, dr.x);
-    d[5 * r + 2] = dr.yz;
-    d[5 * r + 3] = vec2(dr.w, ds.x);
-    d[5 * r + 4] = ds.yz;
+    ST2(d, 5 * r, dx.xy);
+    ST2(d, 5 * r + 1, vec2(dx.z, dr.x));
+    ST2(d, 5 * r + 2, dr.yz);
+    ST2(d, 5 * r + 3, vec2(dr.w, ds.x));
+    ST2(d, 5 * r + 4, ds.yz);
 }

@@ -6,25 +6,26 @@
 // Every path is differentiated, the weights' dependence on μ, p and ρ included.
 // nodes_blend.glsl brings the includes, the push constants and bindings 0-5.
 #include "nodes_blend.glsl"
-layout(std430, binding = 6) readonly buffer DOut { vec2 g[]; };           // [rows,10] ∂L/∂D as [rows,5]
-layout(std430, binding = 7) writeonly buffer Contrib { vec4 contrib[]; };  // [N,K,4] (CONTRIB_VEC4)
-layout(std430, binding = 8) buffer GMeans { float g_means[]; };           // [N,3] +=
-layout(std430, binding = 9) buffer GQuats { vec4 g_quats[]; };            // [N] +=
+ARR_RO(6, vec2, rg32f, DOut, g) // [rows,10] ∂L/∂D as [rows,5]
+ARR_WO(7, vec4, rgba32f, Contrib, contrib)  // [N,K,4] (CONTRIB_VEC4)
+ARR_RW(8, float, r32f, GMeans, g_means) // [N,3] +=
+ARR_RW(9, vec4, rgba32f, GQuats, g_quats) // [N] +=
 
 void main() {
     uint r, i;
     if (!this_row(r, i)) return;
-    vec3 mu = vec3(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+    vec3 mu = vec3(LD1(means, 3 * i), LD1(means, 3 * i + 1), LD1(means, 3 * i + 2));
     Blend b = blend_of(i, mu);
     if (b.count == 0) return;
-    vec2 g0 = g[5 * r], g1 = g[5 * r + 1], g2 = g[5 * r + 2], g3 = g[5 * r + 3], g4 = g[5 * r + 4];
+    vec2 g0 = LD2(g, 5 * r), g1 = LD2(g, 5 * r + 1), g2 = LD2(g, 5 * r + 2);
+    vec2 g3 = LD2(g, 5 * r + 3), g4 = LD2(g, 5 * r + 4);
     vec3 gx = vec3(g0, g1.x);
     vec4 gr = vec4(g1.y, g2, g3.x);
     vec3 gs = vec3(g3.y, g4);
 
     // dr = q_b ⊗ q̂ − q̂.
     float ql, qbl;
-    vec4 qn = quat_normalize(quats[i], ql);
+    vec4 qn = quat_normalize(LD4(quats, i), ql);
     vec4 qb = quat_normalize(b.Q, qbl);
     vec4 g_qn = qmul(qconj(qb), gr) - gr;
     vec4 g_Q = unit_grad(qb, qbl, qmul(gr, qconj(qn)));
@@ -55,12 +56,18 @@ void main() {
         g_mu += g_v;
         uint o = (i * pc.k + s) * CONTRIB_VEC4;
         vec3 t = w * gx, d = w * gs, p = -g_v;
-        contrib[o] = vec4(t, g_dq.x);
-        contrib[o + 1] = vec4(g_dq.yzw, d.x);
-        contrib[o + 2] = vec4(d.yz, p.xy);
-        contrib[o + 3] = vec4(p.z, g_rho, 0.0, 0.0);
+        ST4(contrib, o, vec4(t, g_dq.x));
+        ST4(contrib, o + 1, vec4(g_dq.yzw, d.x));
+        ST4(contrib, o + 2, vec4(d.yz, p.xy));
+        ST4(contrib, o + 3, vec4(p.z, g_rho, 0.0, 0.0));
     }
+#ifdef TEXEL_ACCESS
+    for (uint a = 0; a < 3u; ++a) ST1(g_means, 3 * i + a, LD1(g_means, 3 * i + a) + g_mu[a]);
+    vec4 g_q = unit_grad(qn, ql, g_qn);
+    ST4(g_quats, i, LD4(g_quats, i) + g_q);
+#else
     for (uint a = 0; a < 3u; ++a) g_means[3 * i + a] += g_mu[a];
     vec4 g_q = unit_grad(qn, ql, g_qn);
     g_quats[i] += g_q;
+#endif
 }

@@ -130,8 +130,8 @@ const BANDS: KernelSet = KernelSet {
 /// the same with the blend backward giving each tile to the bands or the whole-tile kernel by
 /// the forward's stopping points (stop 72), and today's CPU default: the same choices with the
 /// whole-tile blends, whose walks load their splats in batches (stop 74), and today's CPU
-/// default: that set with the flow, the whole-tile blends, the rows MLP and the rows blur
-/// reading and writing their arrays through texel buffers (stop 76).
+/// default: that set with the flow, the whole-tile blends, the rows MLP, the loss, the
+/// control-node blend and Adam reading and writing their arrays through texel buffers (stop 76).
 pub const KERNEL_SETS: [KernelSet; 8] = [
     KernelSet {
         name: "tiled MLP + shared blend fwd + subgroup-atomic blend bwd (before)",
@@ -154,8 +154,8 @@ pub const KERNEL_SETS: [KernelSet; 8] = [
     PICKED,
     BATCHED,
     KernelSet {
-        name: "the same with the flow, whole-tile blends, rows MLP and rows blur reading and \
-               writing through texel buffers (today's CPU default)",
+        name: "the same with the flow, whole-tile blends, rows MLP, loss, node blend and Adam \
+               reading and writing through texel buffers (today's CPU default)",
         access: "texel",
         ..BATCHED
     },

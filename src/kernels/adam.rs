@@ -6,6 +6,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::Result;
+use crate::kernels::shape::{Access, DeviceShape};
 use crate::model::optim::AdamHyper;
 use crate::shaders;
 use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
@@ -56,8 +57,14 @@ pub struct Adam {
 
 impl Adam {
     pub fn new(gpu: &Gpu) -> Result<Self> {
+        Self::with_access(gpu, Access::for_device(&gpu.info))
+    }
+
+    /// Adam reaching its arrays through `access` (tests run both).
+    pub fn with_access(gpu: &Gpu, access: Access) -> Result<Self> {
+        use shaders::optim as o;
         Ok(Adam {
-            pipe: gpu.pipeline(&shaders::optim::ADAM)?,
+            pipe: gpu.pipeline(access.pick(&o::ADAM, &o::ADAM_TEXEL))?,
             no_skip: gpu.buffer_from("adam no-skip", &[0u32; 4])?,
         })
     }

@@ -147,8 +147,8 @@ impl PhotometricLoss {
         Self::with_shapes(gpu, blur, Access::for_device(&gpu.info))
     }
 
-    /// The loss with the blur of shape `blur`, the rows blur reaching its planes through
-    /// `access`.
+    /// The loss with the blur of shape `blur`, every stage with a texel twin (all but the pixel
+    /// blur) reaching its arrays through `access`.
     pub fn with_shapes(gpu: &Gpu, blur: BlurShape, access: Access) -> Result<Self> {
         use shaders::loss as l;
         let (h, v) = match blur {
@@ -159,11 +159,11 @@ impl PhotometricLoss {
             ),
         };
         Ok(PhotometricLoss {
-            products: gpu.pipeline(&l::SSIM_PRODUCTS)?,
+            products: gpu.pipeline(access.pick(&l::SSIM_PRODUCTS, &l::SSIM_PRODUCTS_TEXEL))?,
             blur_h: gpu.pipeline(h)?,
             blur_v: gpu.pipeline(v)?,
-            ssim_map: gpu.pipeline(&l::SSIM_MAP)?,
-            grad: gpu.pipeline(&l::LOSS_GRAD)?,
+            ssim_map: gpu.pipeline(access.pick(&l::SSIM_MAP, &l::SSIM_MAP_TEXEL))?,
+            grad: gpu.pipeline(access.pick(&l::LOSS_GRAD, &l::LOSS_GRAD_TEXEL))?,
             blur,
         })
     }

@@ -8,7 +8,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::radix_sort::{passes, KeyWidth, RadixSort, SortBuffers};
 use super::scan::Count;
-pub use super::shape::DeviceShape;
+pub use super::shape::{Access, DeviceShape};
 use crate::error::{Error, Result};
 use crate::shaders;
 use crate::vk::{BufSlice, Buffer, ComputePipeline, Gpu, Recorder};
@@ -201,17 +201,29 @@ impl NodeKernels {
 
     /// The kernels with both shapes given (tests run every pair).
     pub fn with_shapes(gpu: &Gpu, gather: GatherShape, slots: SlotLoop) -> Result<Self> {
+        Self::with_access(gpu, gather, slots, Access::for_device(&gpu.info))
+    }
+
+    /// [`NodeKernels::with_shapes`] with the blend and its backward reaching their arrays
+    /// through `access`.
+    pub fn with_access(
+        gpu: &Gpu,
+        gather: GatherShape,
+        slots: SlotLoop,
+        access: Access,
+    ) -> Result<Self> {
         use shaders::nodes as s;
+        let pick = |b, t| gpu.pipeline(access.pick(b, t));
         Ok(NodeKernels {
             knn: gpu.pipeline(&s::NODES_KNN)?,
             pairs: gpu.pipeline(&s::NODES_PAIRS)?,
             ranges: gpu.pipeline(&s::NODES_RANGES)?,
-            lbs: gpu.pipeline(&s::NODES_LBS)?,
-            lbs_bwd: gpu.pipeline(&s::NODES_LBS_BWD)?,
+            lbs: pick(&s::NODES_LBS, &s::NODES_LBS_TEXEL)?,
+            lbs_bwd: pick(&s::NODES_LBS_BWD, &s::NODES_LBS_BWD_TEXEL)?,
             lbs4: match slots {
                 SlotLoop::Fit => Some((
-                    gpu.pipeline(&s::NODES_LBS_K4)?,
-                    gpu.pipeline(&s::NODES_LBS_BWD_K4)?,
+                    pick(&s::NODES_LBS_K4, &s::NODES_LBS_K4_TEXEL)?,
+                    pick(&s::NODES_LBS_BWD_K4, &s::NODES_LBS_BWD_K4_TEXEL)?,
                 )),
                 SlotLoop::Max => None,
             },

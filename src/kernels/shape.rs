@@ -116,7 +116,7 @@ pub fn device_choices(info: &DeviceInfo) -> Vec<(&'static str, &'static str, &'s
         row::<BlurShape>("loss blur", info),
         row::<NormMagShape>("motion magnitude", info),
         row::<radix_sort::SortShape>("radix sort", info),
-        row::<Access>("array access (flow)", info),
+        row::<Access>("array access", info),
     ]
 }
 

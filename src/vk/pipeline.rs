@@ -16,6 +16,8 @@ pub struct ComputePipeline {
     pub info: &'static ShaderInfo,
     pub(crate) pipeline: vk::Pipeline,
     pub(crate) layout: vk::PipelineLayout,
+    /// The storage-buffer twin of a texel-buffer stage (`ShaderInfo::buffer_twin`).
+    pub(crate) twin: Option<Box<ComputePipeline>>,
     _objects: Arc<PipelineObjects>,
 }
 
@@ -58,20 +60,28 @@ pub(crate) struct PipelineCache(Mutex<HashMap<&'static str, Arc<PipelineObjects>
 
 impl Gpu {
     /// The pipeline of `info`: the device's own if it built one already, else a new one.
+    /// A texel-buffer stage comes with its storage-buffer twin's pipeline.
     pub fn pipeline(&self, info: &'static ShaderInfo) -> Result<ComputePipeline> {
-        let mut cache = self.pipelines.0.lock().unwrap_or_else(|e| e.into_inner());
-        let objects = match cache.get(info.name) {
-            Some(o) => o.clone(),
-            None => {
-                let o = Arc::new(self.build_pipeline(info)?);
-                cache.insert(info.name, o.clone());
-                o
+        let objects = {
+            let mut cache = self.pipelines.0.lock().unwrap_or_else(|e| e.into_inner());
+            match cache.get(info.name) {
+                Some(o) => o.clone(),
+                None => {
+                    let o = Arc::new(self.build_pipeline(info)?);
+                    cache.insert(info.name, o.clone());
+                    o
+                }
             }
+        };
+        let twin = match info.buffer_twin {
+            Some(t) => Some(Box::new(self.pipeline(t)?)),
+            None => None,
         };
         Ok(ComputePipeline {
             info,
             pipeline: objects.pipeline,
             layout: objects.layout,
+            twin,
             _objects: objects,
         })
     }

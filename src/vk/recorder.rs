@@ -61,6 +61,22 @@ impl Timings {
 
 const MAX_TIMED: u32 = 4096;
 
+/// Whether bytes `[offset, offset + size)` can be a view of `texel`-byte texels: the offset on
+/// `align`, 1 to `max_texels` whole texels.
+fn texel_fits((offset, size): (u64, u64), texel: u64, align: u64, max_texels: u32) -> bool {
+    let texels = size / texel;
+    offset % align.max(1) == 0 && texels >= 1 && texels <= max_texels as u64
+}
+
+/// Bytes of one texel of the formats `imageBuffer` bindings use (build.rs's list).
+fn texel_bytes(format: vk::Format) -> u64 {
+    match format {
+        vk::Format::R32G32B32A32_SFLOAT | vk::Format::R32G32B32A32_UINT => 16,
+        vk::Format::R32G32_SFLOAT => 8,
+        _ => 4,
+    }
+}
+
 /// One primary command buffer on the compute queue. `finish()` submits and waits.
 pub struct Recorder<'g> {
     gpu: &'g Gpu,
@@ -76,6 +92,7 @@ pub struct Recorder<'g> {
     tracking: bool,
     /// Texel-buffer views made for this command buffer's dispatches.
     views: Vec<vk::BufferView>,
+    twin_dispatches: u32,
 }
 
 impl<'g> Recorder<'g> {
@@ -113,6 +130,7 @@ impl<'g> Recorder<'g> {
             dispatches: 0,
             tracking: true,
             views: Vec::new(),
+            twin_dispatches: 0,
         };
         rec.cmd = unsafe {
             d.allocate_command_buffers(
@@ -254,24 +272,50 @@ impl<'g> Recorder<'g> {
         }
     }
 
-    /// A view of `s` as texels of `format`, over the whole texels the slice holds.
-    fn texel_view(&self, s: &BufSlice<'_>, format: vk::Format) -> vk::BufferView {
-        let texel = match format {
-            vk::Format::R32G32B32A32_SFLOAT | vk::Format::R32G32B32A32_UINT => 16,
-            vk::Format::R32G32_SFLOAT => 8,
-            _ => 4,
-        };
+    /// Whether `s` can be a texel view of `format` on this device: its offset on the texel
+    /// alignment, and 1 to `maxTexelBufferElements` whole texels.
+    fn texel_fits(&self, s: &BufSlice<'_>, format: vk::Format) -> bool {
         let info = &self.gpu.info;
-        let texels = s.size / texel;
-        assert!(
-            s.offset % info.min_texel_buffer_offset_alignment.max(1) == 0
-                && texels >= 1
-                && texels <= info.max_texel_buffer_elements as u64,
-            "texel-buffer binding {s:?} as {format:?}: the offset must be a multiple of {} \
-             bytes and the slice hold 1 to {} texels of {texel} bytes",
+        texel_fits(
+            (s.offset, s.size),
+            texel_bytes(format),
             info.min_texel_buffer_offset_alignment,
-            info.max_texel_buffer_elements
+            info.max_texel_buffer_elements,
+        )
+    }
+
+    /// `p`, or its storage-buffer twin when one of `bindings` cannot be a texel view of `p`
+    /// (the same results; only the CPU shape's speed is lost).
+    fn runnable<'p>(
+        &mut self,
+        p: &'p ComputePipeline,
+        bindings: &[BufSlice<'_>],
+    ) -> &'p ComputePipeline {
+        let Some(twin) = &p.twin else { return p };
+        let fits = (p.info.bindings.iter().zip(bindings)).all(|(b, s)| {
+            b.texel_format == 0 || self.texel_fits(s, vk::Format::from_raw(b.texel_format))
+        });
+        if fits {
+            p
+        } else {
+            self.twin_dispatches += 1;
+            twin
+        }
+    }
+
+    /// Dispatches of a texel-buffer stage that ran its storage-buffer twin instead.
+    pub fn twin_dispatch_count(&self) -> u32 {
+        self.twin_dispatches
+    }
+
+    /// A view of `s` as texels of `format`, over the whole texels the slice holds (`runnable`
+    /// checked that it fits).
+    fn texel_view(&self, s: &BufSlice<'_>, format: vk::Format) -> vk::BufferView {
+        assert!(
+            self.texel_fits(s, format),
+            "texel-buffer binding {s:?} as {format:?}"
         );
+        let texels = s.size / texel_bytes(format);
         unsafe {
             self.gpu
                 .device()
@@ -280,7 +324,7 @@ impl<'g> Recorder<'g> {
                         .buffer(s.raw())
                         .format(format)
                         .offset(s.offset)
-                        .range(texels * texel),
+                        .range(texels * texel_bytes(format)),
                     None,
                 )
                 .expect("vkCreateBufferView")
@@ -392,6 +436,7 @@ impl<'g> Recorder<'g> {
         bindings: &[BufSlice<'_>],
         groups: [u32; 3],
     ) {
+        let p = self.runnable(p, bindings);
         self.bind(p, pc, bindings);
         let lim = self.gpu.info.max_workgroup_count;
         assert!(
@@ -456,6 +501,7 @@ impl<'g> Recorder<'g> {
         let a = Range::of(&args.buf.slice(args.offset, 12));
         // The args are read by the indirect stage before the shader runs.
         self.hazard(&[a], &[]);
+        let p = self.runnable(p, bindings);
         self.bind(p, pc, bindings);
         let t = self.time_begin(p.info.name.rsplit('/').next().unwrap());
         unsafe {
@@ -575,5 +621,25 @@ impl Drop for Recorder<'_> {
                 d.destroy_buffer_view(v, None);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::texel_fits;
+
+    #[test]
+    fn a_binding_is_a_texel_view_only_on_the_alignment_with_whole_texels_in_range() {
+        assert!(texel_fits((32, 64), 16, 16, 1 << 27));
+        assert!(!texel_fits((16, 64), 16, 64, 1 << 27), "off the alignment");
+        assert!(!texel_fits((0, 8), 16, 16, 1 << 27), "no whole texel");
+        assert!(
+            !texel_fits((0, 80), 16, 16, 4),
+            "more texels than the device allows"
+        );
+        assert!(
+            texel_fits((0, 70), 16, 16, 4),
+            "a partial last texel is left out"
+        );
     }
 }

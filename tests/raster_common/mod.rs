@@ -248,15 +248,25 @@ pub fn render_each_access(
     opts: &RenderOpts,
 ) -> Vec<(BlendFwdVariant, RasterBuffers, Rendered)> {
     let mut out = render_each(gpu, rast, cam, up, opts);
-    let default = rast.blend_fwd_variant();
+    let v = BlendFwdVariant::TileRegs;
+    let (b, r) = in_other_access(rast, |rast| {
+        let default = rast.blend_fwd_variant();
+        rast.set_blend_fwd_variant(v);
+        let r = render(gpu, rast, cam, up, opts);
+        rast.set_blend_fwd_variant(default);
+        r
+    });
+    out.push((v, b, r));
+    out
+}
+
+/// Runs `f` with `rast` in the other array access, then restores the access.
+fn in_other_access<T>(rast: &mut Rasterizer, f: impl FnOnce(&mut Rasterizer) -> T) -> T {
     let access = rast.access();
     rast.set_access(other_access(access));
-    rast.set_blend_fwd_variant(BlendFwdVariant::TileRegs);
-    let (b, r) = render(gpu, rast, cam, up, opts);
-    out.push((BlendFwdVariant::TileRegs, b, r));
+    let r = f(rast);
     rast.set_access(access);
-    rast.set_blend_fwd_variant(default);
-    out
+    r
 }
 
 /// The array access a device does not pick (the whole-tile blends have both).
@@ -374,16 +384,15 @@ pub fn backward_each_access(
     u: &Upstream,
 ) -> Vec<(BlendBwdVariant, Grads)> {
     let mut out = backward_each(gpu, rast, b, cam, up, opts, u);
-    let default = rast.blend_bwd_variant();
-    let access = rast.access();
-    rast.set_access(other_access(access));
-    rast.set_blend_bwd_variant(BlendBwdVariant::TileAccum);
-    out.push((
-        BlendBwdVariant::TileAccum,
-        backward(gpu, rast, b, cam, up, opts, u),
-    ));
-    rast.set_access(access);
-    rast.set_blend_bwd_variant(default);
+    let v = BlendBwdVariant::TileAccum;
+    let grads = in_other_access(rast, |rast| {
+        let default = rast.blend_bwd_variant();
+        rast.set_blend_bwd_variant(v);
+        let g = backward(gpu, rast, b, cam, up, opts, u);
+        rast.set_blend_bwd_variant(default);
+        g
+    });
+    out.push((v, grads));
     out
 }
 

@@ -1,0 +1,6 @@
+#version 460
+// nodes_lbs_bwd.comp with its arrays as texel buffers (glsl/include/access.glsl; the CPU shape of
+// kernels::shape::Access).
+#define NODES_KLOOP NODES_KMAX
+#define TEXEL_ACCESS
+#include "nodes_lbs_bwd.glsl"
