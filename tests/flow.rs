@@ -797,3 +797,27 @@ fn speed_accuracy_table() {
 }
 
 dispflow_vk::subgroup_reruns!();
+
+/// Both array accesses run the same float operations in the same order: bit-identical flows.
+#[test]
+fn texel_and_buffer_shapes_give_the_same_floats() {
+    let cfg = FlowConfig {
+        finest: 1,
+        ..FlowConfig::fast()
+    };
+    let (w, h) = (96usize, 72usize);
+    let (a, b, _) = translation(w, h, 31, [1.7, -0.9]);
+    let [buf, tex] = ACCESSES.map(|acc| gpu_flow_in(acc, cfg, w as u32, h as u32, &a, &b));
+    let diff = buf
+        .iter()
+        .zip(&tex)
+        .filter(|(x, y)| x[0].to_bits() != y[0].to_bits() || x[1].to_bits() != y[1].to_bits())
+        .count();
+    let max = max_diff(&tex, &to_f64(&buf));
+    assert_eq!(
+        diff,
+        0,
+        "{diff} of {} pixels differ, max {max:.3e} px",
+        w * h
+    );
+}

@@ -45,7 +45,10 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
     let up = Uploaded::new(&gpu, &scene);
     // Every forward variant, and every backward variant after each (the backward reads the
     // forward's final T and last contributors).
-    for (fv, b, out) in render_each_access(&gpu, &mut rast, &cam, &up, &opts) {
+    let forwards = render_each_access(&gpu, &mut rast, &cam, &up, &opts);
+    // The whole tile through texel and through storage buffers: the same bits.
+    same_bits("forward", &forwards[1].2, &forwards[forwards.len() - 1].2);
+    for (fv, b, out) in forwards {
         let ctx = format!(
             "seed {seed}, n {n}, {w}x{h}, sh {sh_degree}, k {k}, blend_fwd {}",
             fv.name()
@@ -186,6 +189,20 @@ fn compare(seed: u64, n: usize, w: u32, h: u32, sh_degree: u32, k: u32) {
             check_grads(&ctx, n, &grads, &bg, &pg, opts.abs_grad);
         }
     }
+}
+
+/// Two renders with the same bits in every output.
+fn same_bits(what: &str, a: &Rendered, b: &Rendered) {
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let rgba = |r: &Rendered| bits(&r.rgba.concat());
+    assert!(
+        rgba(a) == rgba(b)
+            && bits(&a.depth) == bits(&b.depth)
+            && bits(&a.final_t) == bits(&b.final_t)
+            && a.n_contrib == b.n_contrib
+            && bits(&a.features) == bits(&b.features),
+        "{what}: the whole tile differs between texel and storage buffers"
+    );
 }
 
 /// Every gradient of one backward run against the twin's.
